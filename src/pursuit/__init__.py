@@ -1,0 +1,30 @@
+"""pursuit: tracking and positioning filters with a fair, fast Monte Carlo engine."""
+
+from .engine.run import run
+from .filters import (
+    Constant,
+    CubatureKalmanFilter,
+    ExtendedKalmanFilter,
+    KalmanFilter,
+    UnscentedKalmanFilter,
+    rts_smooth,
+)
+from .gaussian import Gaussian
+from .rng import RunStreams
+from .track import Track
+
+__version__ = "0.1.0.dev0"
+
+__all__ = [
+    "Gaussian",
+    "RunStreams",
+    "Track",
+    "run",
+    "KalmanFilter",
+    "ExtendedKalmanFilter",
+    "UnscentedKalmanFilter",
+    "CubatureKalmanFilter",
+    "Constant",
+    "rts_smooth",
+    "__version__",
+]

@@ -1,0 +1,136 @@
+"""Input checks shared by models, filters and the config loader.
+
+Each check raises ``ValueError`` whose message starts with the name of the
+offending field, so a caller (the config loader, the CLI) can prefix the file
+and show one clear line.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+__all__ = [
+    "as_float_array",
+    "as_vector",
+    "as_matrix",
+    "as_covariance",
+    "positive",
+    "nonnegative",
+    "positive_int",
+    "in_range",
+]
+
+
+def as_float_array(name: str, value, ndim: int | None = None) -> np.ndarray:
+    """Convert to a finite float64 array, optionally of a given number of axes."""
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected numbers, got {value!r}") from None
+    if ndim is not None and arr.ndim != ndim:
+        raise ValueError(f"{name}: expected {ndim}-D array, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: contains NaN or infinity")
+    return arr
+
+
+def as_vector(name: str, value, length: int | None = None) -> np.ndarray:
+    """A finite 1-D float vector, optionally of a given length."""
+    v = as_float_array(name, value)
+    if v.ndim == 0:
+        v = v.reshape(1)
+    if v.ndim != 1:
+        raise ValueError(f"{name}: expected a vector, got shape {v.shape}")
+    if length is not None and v.shape[0] != length:
+        raise ValueError(f"{name}: expected length {length}, got {v.shape[0]}")
+    return v
+
+
+def as_matrix(name: str, value, shape: Sequence[int | None] | None = None) -> np.ndarray:
+    """A finite 2-D float matrix whose shape matches ``shape`` (None = any)."""
+    A = as_float_array(name, value)
+    if A.ndim != 2:
+        raise ValueError(f"{name}: expected a matrix, got shape {A.shape}")
+    if shape is not None:
+        for want, got in zip(shape, A.shape):
+            if want is not None and want != got:
+                raise ValueError(f"{name}: expected shape {tuple(shape)}, got {A.shape}")
+    return A
+
+
+def as_covariance(name: str, value, dim: int | None = None, *, allow_singular: bool = False) -> np.ndarray:
+    """A covariance matrix: scalar (times identity), vector (diagonal) or matrix.
+
+    Checks symmetry and positive definiteness (or semidefiniteness with
+    ``allow_singular``) and raises ``ValueError`` naming ``name`` otherwise.
+    """
+    C = as_float_array(name, value)
+    if C.ndim == 0:
+        if dim is None:
+            raise ValueError(f"{name}: a scalar covariance needs a known dimension")
+        C = C * np.eye(dim)
+    elif C.ndim == 1:
+        C = np.diag(C)
+    if C.ndim != 2 or C.shape[0] != C.shape[1]:
+        raise ValueError(f"{name}: expected a square matrix, got shape {C.shape}")
+    if dim is not None and C.shape[0] != dim:
+        raise ValueError(f"{name}: expected a {dim}x{dim} matrix, got {C.shape[0]}x{C.shape[1]}")
+    scale = max(float(np.max(np.abs(C))), 1e-300)
+    if not np.allclose(C, C.T, rtol=1e-9, atol=1e-12 * scale):
+        raise ValueError(f"{name}: covariance is not symmetric")
+    C = 0.5 * (C + C.T)
+    w = np.linalg.eigvalsh(C)
+    if allow_singular:
+        if w.min() < -1e-9 * max(w.max(), 1e-300):
+            raise ValueError(f"{name}: covariance is not positive semidefinite (smallest eigenvalue {w.min():.3g})")
+    elif w.min() <= 0:
+        raise ValueError(f"{name}: covariance is not positive definite (smallest eigenvalue {w.min():.3g})")
+    return C
+
+
+def positive(name: str, value) -> float:
+    """A finite number > 0."""
+    v = _number(name, value)
+    if not v > 0:
+        raise ValueError(f"{name}: must be positive, got {value!r}")
+    return v
+
+
+def nonnegative(name: str, value) -> float:
+    """A finite number >= 0."""
+    v = _number(name, value)
+    if not v >= 0:
+        raise ValueError(f"{name}: must be non-negative, got {value!r}")
+    return v
+
+
+def positive_int(name: str, value) -> int:
+    """An integer >= 1 (bools are refused)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name}: expected an integer, got {value!r}")
+    if value < 1:
+        raise ValueError(f"{name}: must be at least 1, got {value}")
+    return int(value)
+
+
+def in_range(name: str, value, low: float, high: float, *, low_open: bool = False, high_open: bool = False) -> float:
+    """A finite number inside [low, high], with optionally open ends."""
+    v = _number(name, value)
+    lo_ok = v > low if low_open else v >= low
+    hi_ok = v < high if high_open else v <= high
+    if not (lo_ok and hi_ok):
+        lb = "(" if low_open else "["
+        hb = ")" if high_open else "]"
+        raise ValueError(f"{name}: must lie in {lb}{low}, {high}{hb}, got {value!r}")
+    return v
+
+
+def _number(name: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{name}: expected a number, got {value!r}")
+    v = float(value)
+    if not np.isfinite(v):
+        raise ValueError(f"{name}: must be finite, got {value!r}")
+    return v

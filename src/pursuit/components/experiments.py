@@ -1,0 +1,175 @@
+"""The ``montecarlo`` experiment kind: one scenario, several filters, many runs."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import registry
+from ..engine.montecarlo import monte_carlo, validate_filters
+from ..experiment import ExperimentOutput, Table
+from ..registry import Param, register
+from ..report.figures import rmse_over_time, trajectory
+from ..results import MonteCarloResult
+
+__all__ = ["MonteCarloPlan", "build_scenario", "build_filters", "summary_table", "paper_table", "PAPER_PARAMS"]
+
+FIGURE_PARAMS = (
+    Param("trajectory_run", "int", 0, "which run's trajectory to draw"),
+    Param("log_rmse", "bool", False, "logarithmic RMSE axes"),
+)
+
+PAPER_PARAMS = (
+    Param("filter", "str", doc="filter name as in [[filters]]"),
+    Param("metric", "str", doc="a summary column, e.g. rmse_position, rms_x, wall_time_s"),
+    Param("value", "float", doc="the paper's number"),
+    Param("note", "str", "", "where the number comes from, caveats"),
+)
+
+
+def build_scenario(sections: dict[str, Any]) -> Any:
+    """Build the ``[scenario]`` table through the registry."""
+    table = sections.get("scenario")
+    if table is None:
+        raise ValueError("scenario: required section is missing")
+    if not isinstance(table, dict):
+        raise ValueError("scenario: expected a table")
+    values = dict(table)
+    kind = values.pop("type", None)
+    if kind is None:
+        raise ValueError("scenario.type: required (see `pursuit list`)")
+    comp = registry.get("scenario", kind, "scenario.type")
+    return comp.build(where="scenario", **comp.resolve(values, "scenario"))
+
+
+def build_filters(sections: dict[str, Any], scenario: Any) -> list[Any]:
+    """Build every ``[[filters]]`` entry against the scenario."""
+    entries = sections.get("filters")
+    if entries is None:
+        raise ValueError("filters: required section is missing (add [[filters]] tables)")
+    if not isinstance(entries, list) or not entries or not all(isinstance(e, dict) for e in entries):
+        raise ValueError("filters: expected one or more [[filters]] tables")
+    out = []
+    for i, entry in enumerate(entries):
+        where = f"filters[{i}]"
+        values = dict(entry)
+        kind = values.pop("type", None)
+        if kind is None:
+            raise ValueError(f"{where}.type: required (see `pursuit list`)")
+        comp = registry.get("filter", kind, f"{where}.type")
+        out.append(comp.build(scenario=scenario, where=where, **comp.resolve(values, where)))
+    try:
+        return validate_filters(out)
+    except ValueError as e:
+        raise ValueError(str(e)) from None
+
+
+def resolve_section(sections: dict[str, Any], name: str, params: tuple[Param, ...]) -> dict[str, Any]:
+    """Check an optional plain table against a parameter list."""
+    table = sections.get(name, {})
+    if not isinstance(table, dict):
+        raise ValueError(f"{name}: expected a table")
+    return registry.Component("section", name, "", params, dict).resolve(table, name)
+
+
+def resolve_paper(sections: dict[str, Any], filter_names: list[str]) -> list[dict[str, Any]]:
+    """Check the ``[[paper]]`` reference values."""
+    entries = sections.get("paper", [])
+    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+        raise ValueError("paper: expected [[paper]] tables")
+    out = []
+    for i, entry in enumerate(entries):
+        where = f"paper[{i}]"
+        vals = registry.Component("section", "paper", "", PAPER_PARAMS, dict).resolve(entry, where)
+        if vals["filter"] not in filter_names:
+            raise ValueError(f"{where}.filter: no filter named {vals['filter']!r} (have {', '.join(filter_names)})")
+        out.append(vals)
+    return out
+
+
+def summary_table(result: MonteCarloResult, name: str = "summary", title: str = "") -> Table:
+    """The per-filter summary as a :class:`Table`."""
+    rows = result.summary()
+    cols: list[str] = []
+    for r in rows:
+        for key in r:
+            if key not in cols:
+                cols.append(key)
+    return Table(name, title or f"{result.scenario}: {result.runs} runs, seed {result.seed}", cols, [[r.get(c) for c in cols] for r in rows])
+
+
+def paper_table(result: MonteCarloResult, paper: list[dict[str, Any]], name: str = "paper_vs_measured") -> Table:
+    """Paper values beside ours, with the ratio measured / paper."""
+    summary = {r["filter"]: r for r in result.summary()}
+    rows = []
+    for p in paper:
+        measured = summary[p["filter"]].get(p["metric"])
+        ratio = measured / p["value"] if isinstance(measured, float) and p["value"] else None
+        rows.append([p["filter"], p["metric"], p["value"], measured, ratio, p["note"]])
+    return Table(
+        name,
+        "Paper's values (source: paper) beside ours (source: measured)",
+        ["filter", "metric", "paper", "measured", "measured/paper", "note"],
+        rows,
+    )
+
+
+def standard_figures(result: MonteCarloResult, scenario: Any, figure_opts: dict[str, Any]) -> dict[str, Any]:
+    """RMSE against time for position and velocity, and one run's trajectory."""
+    figs: dict[str, Any] = {}
+    log = figure_opts.get("log_rmse", False)
+    if result.position_indices:
+        figs["rmse_position"] = rmse_over_time(result, "position", log=log)
+    if result.velocity_indices:
+        figs["rmse_velocity"] = rmse_over_time(result, "velocity", log=log)
+    if not result.position_indices and not result.velocity_indices:
+        figs["rmse_state"] = rmse_over_time(result, "state", log=log, unit="")
+    run = min(max(figure_opts.get("trajectory_run", 0), 0), result.runs - 1)
+    anchors = getattr(getattr(scenario, "measurement", None), "anchors", None)
+    figs["trajectory"] = trajectory(result, run, landmarks=anchors)
+    return figs
+
+
+@dataclass
+class MonteCarloPlan:
+    """A validated ``montecarlo`` experiment."""
+
+    name: str
+    scenario: Any
+    filters: list[Any]
+    figure_opts: dict[str, Any]
+    paper: list[dict[str, Any]]
+    sections: dict[str, Any] = field(repr=False)
+
+    def run(self, *, runs: int, seed: int, progress: bool = False, chunk_size: int | None = None) -> ExperimentOutput:
+        """Run the comparison and assemble tables and figures."""
+        result = monte_carlo(
+            self.scenario, self.filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections
+        )
+        tables = [summary_table(result)]
+        if self.paper:
+            tables.append(paper_table(result, self.paper))
+        figs = standard_figures(result, self.scenario, self.figure_opts)
+        return ExperimentOutput(self.name, "", "", tables, figs, results={"result": result})
+
+
+_KNOWN_SECTIONS = {"scenario", "filters", "figures", "paper"}
+
+
+@register(
+    "experiment",
+    "montecarlo",
+    "Compare filters on one scenario over many runs; sections [scenario], [[filters]], [figures], [[paper]]",
+)
+def _montecarlo(sections: dict[str, Any], path: Path, name: str) -> MonteCarloPlan:
+    for key in sections:
+        if key not in _KNOWN_SECTIONS:
+            raise ValueError(f"{key}: unknown section (known: experiment, {', '.join(sorted(_KNOWN_SECTIONS))})")
+    scenario = build_scenario(sections)
+    filters = build_filters(sections, scenario)
+    figure_opts = resolve_section(sections, "figures", FIGURE_PARAMS)
+    paper = resolve_paper(sections, [f.name for f in filters])
+    return MonteCarloPlan(name, scenario, filters, figure_opts, paper, sections)

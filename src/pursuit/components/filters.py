@@ -1,0 +1,89 @@
+"""Filter and fading-strategy registrations.
+
+A filter entry in a config is built against the scenario: by default it uses
+the scenario's own (matched) motion and measurement models.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from .. import registry
+from ..filters.fading import Constant
+from ..filters.gaussian import CubatureKalmanFilter, ExtendedKalmanFilter, KalmanFilter, UnscentedKalmanFilter
+from ..registry import Param, register
+
+
+def build_fading(field: str, value: Any):
+    """A fading strategy from a number (constant λ) or a table ``{type = ..., ...}``."""
+    if isinstance(value, bool):
+        raise ValueError(f"{field}: expected a number or a table, got a boolean")
+    if isinstance(value, (int, float)):
+        try:
+            return Constant(float(value))
+        except ValueError as e:
+            raise ValueError(f"{field}.{e}") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"{field}: expected a number (constant λ) or a table with a type, got {value!r}")
+    values = dict(value)
+    kind = values.pop("type", None)
+    if kind is None:
+        raise ValueError(f"{field}.type: required (see `pursuit list` for fading strategies)")
+    comp = registry.get("fading", kind, f"{field}.type")
+    params = comp.resolve(values, field)
+    try:
+        return comp.build(**params)
+    except ValueError as e:
+        raise ValueError(f"{field}.{e}") from None
+
+
+register(
+    "fading",
+    "constant",
+    "Constant fading factor λ (TFMKF); λ = 1 is the plain filter",
+    params=(Param("lam", "float", 1.0, "fading factor, at least 1"),),
+)(Constant)
+
+NAME = Param("name", "str", None, "label in tables and figures (default: the filter's short name)")
+FADING = Param("fading", "any", 1.0, "fading factor λ >= 1, or a table {type = ..., ...}", check=build_fading)
+
+
+def make_filter(cls, scenario, where: str, name: str | None, **kw):
+    """Build ``cls(scenario.motion, scenario.measurement, ...)``, re-anchoring errors under ``where``."""
+    try:
+        return cls(scenario.motion, scenario.measurement, name=name or "", **kw)
+    except TypeError as e:  # the filter cannot use this scenario's models
+        raise ValueError(f"{where}.type: {e}") from None
+    except ValueError as e:
+        raise ValueError(f"{where}.{e}") from None
+
+
+@register("filter", "kf", "Linear Kalman filter (Joseph form)", params=(NAME, FADING))
+def _kf(scenario, where="filter", name=None, fading=None):
+    return make_filter(KalmanFilter, scenario, where, name, fading=fading)
+
+
+@register("filter", "ekf", "Extended Kalman filter (Joseph form; numerical Jacobians if the model has none)", params=(NAME, FADING))
+def _ekf(scenario, where="filter", name=None, fading=None):
+    return make_filter(ExtendedKalmanFilter, scenario, where, name, fading=fading)
+
+
+@register(
+    "filter",
+    "ukf",
+    "Unscented Kalman filter (scaled sigma points)",
+    params=(
+        NAME,
+        FADING,
+        Param("alpha", "float", 1.0, "sigma-point spread"),
+        Param("beta", "float", 2.0, "prior-knowledge weight (2 is optimal for Gaussians)"),
+        Param("kappa", "float", 0.0, "secondary scaling"),
+    ),
+)
+def _ukf(scenario, where="filter", name=None, fading=None, alpha=1.0, beta=2.0, kappa=0.0):
+    return make_filter(UnscentedKalmanFilter, scenario, where, name, fading=fading, alpha=alpha, beta=beta, kappa=kappa)
+
+
+@register("filter", "ckf", "Cubature Kalman filter (third-degree spherical-radial rule)", params=(NAME, FADING))
+def _ckf(scenario, where="filter", name=None, fading=None):
+    return make_filter(CubatureKalmanFilter, scenario, where, name, fading=fading)

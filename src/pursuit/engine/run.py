@@ -1,0 +1,94 @@
+"""The one driver over time: ``run(filter, zs, prior, rng) -> Track``."""
+
+from __future__ import annotations
+
+import time
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+from ..rng import RNGLike, as_rng
+from ..track import SMOOTHER_KEYS, Track
+
+__all__ = ["Track", "run", "SMOOTHER_KEYS"]
+
+
+def run(
+    filt: Any,
+    zs: np.ndarray,
+    prior: Any,
+    rng: RNGLike = None,
+    *,
+    dts: Sequence[float] | np.ndarray | None = None,
+    keep_cov: bool = True,
+    store_predictions: bool = False,
+    keep_info: Iterable[str] | None = None,
+) -> Track:
+    """Run a filter over a sequence of measurements.
+
+    Parameters
+    ----------
+    filt
+        Any pursuit filter (an object with ``init`` and ``step``).
+    zs
+        ``(K, *batch, m)`` measurements, time first; NaN = missing.
+    prior
+        The filter's prior, usually a :class:`pursuit.Gaussian` (its mean
+        may carry the batch axes).
+    rng
+        Randomness for filters that draw (particle filters): a seed, a
+        Generator, or :class:`pursuit.RunStreams` with one stream per run.
+    dts
+        Optional ``(K,)`` time since the previous step, for irregular
+        sampling; default: the motion model's ``dt``.
+    keep_cov
+        Keep the ``(K, *batch, n, n)`` covariances (the largest output).
+    store_predictions
+        Keep the predicted means and covariances and the cross-covariances
+        the RTS smoother needs.
+    keep_info
+        Info keys to keep; default all except the smoother's.
+
+    Returns
+    -------
+    Track
+    """
+    zs = np.asarray(zs, dtype=float)
+    if zs.ndim < 2:
+        raise ValueError(f"zs: expected (K, *batch, m), got shape {zs.shape}")
+    K = zs.shape[0]
+    batch = zs.shape[1:-1]
+    if dts is not None:
+        dts = np.asarray(dts, dtype=float)
+        if dts.shape != (K,):
+            raise ValueError(f"dts: expected shape ({K},), got {dts.shape}")
+        if not np.all(np.isfinite(dts)) or np.any(dts <= 0):
+            raise ValueError("dts: time steps must be finite and positive")
+    rng = as_rng(rng)
+
+    t0 = time.perf_counter()
+    state = filt.init(prior, batch=batch, rng=rng)
+    means = np.empty((K, *state.mean.shape))
+    covs = np.empty((K, *state.mean.shape, state.mean.shape[-1])) if keep_cov else None
+    infos: dict[str, np.ndarray] = {}
+    wanted = None if keep_info is None else set(keep_info)
+    for i in range(K):
+        dt = None if dts is None else float(dts[i])
+        state, info = filt.step(state, zs[i], k=i + 1, dt=dt)
+        means[i] = state.mean
+        if keep_cov:
+            covs[i] = state.cov
+        for key, value in info.items():
+            if key in SMOOTHER_KEYS and not store_predictions:
+                continue
+            if wanted is not None and key not in wanted and key not in SMOOTHER_KEYS:
+                continue
+            value = np.asarray(value)
+            if key in SMOOTHER_KEYS:
+                value = np.broadcast_to(value, (*batch, *value.shape[-(1 if key == "pred_mean" else 2):]))
+            buf = infos.get(key)
+            if buf is None:
+                buf = infos[key] = np.empty((K, *value.shape), dtype=value.dtype)
+            buf[i] = value
+    wall = time.perf_counter() - t0
+    return Track(mean=means, cov=covs, info=infos, name=getattr(filt, "name", type(filt).__name__), wall_time=wall)

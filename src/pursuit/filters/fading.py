@@ -1,0 +1,142 @@
+"""Fading-factor strategies for the predict step of the Gaussian filters.
+
+Every Gaussian filter (KF, EKF, UKF, CKF) forms its predicted covariance as
+
+    P⁻_k = λ_k · P̄_k + Q_k,     P̄_k = F P_{k-1} Fᵀ (or its sigma-point analogue),
+
+with λ_k ≥ 1 chosen by a *fading strategy*.  λ = 1 is the plain filter; a
+constant λ > 1 is the classic fading-memory filter, which discounts old data
+exponentially.  Adaptive strategies (exponentially weighted, strong tracking,
+the improved divergence-tested rule of paper P2) choose λ_k from the current
+innovation; they plug in here without any change to the filters.
+
+A strategy is any object with
+
+* ``data_independent`` (bool): True when λ does not depend on the
+  measurements.  The Kalman filter then keeps one covariance for all runs.
+* ``init(batch) -> memory``: the strategy's own state (``None`` if it has
+  none);
+* ``factor(memory, ctx) -> (Fade, memory)``: λ for this step, from a
+  :class:`FadingContext`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any, Callable, Mapping, Protocol
+
+import numpy as np
+
+from .._validation import in_range
+
+__all__ = ["Fade", "FadingContext", "FadingStrategy", "Constant", "NoFading"]
+
+
+@dataclass(frozen=True)
+class Fade:
+    """A strategy's decision for one step.
+
+    Attributes
+    ----------
+    lam
+        Fading factor λ ≥ 1, a scalar or ``(*batch,)``.
+    skip
+        Optional ``(*batch,)`` boolean: runs whose measurement update is
+        skipped this step (an outlier gate); they only predict.
+    info
+        Extra per-step diagnostics, copied into the filter's step info.
+    """
+
+    lam: np.ndarray | float
+    skip: np.ndarray | None = None
+    info: Mapping[str, np.ndarray] = field(default_factory=dict)
+
+
+class FadingContext:
+    """What a fading strategy may look at when it chooses λ_k.
+
+    Parameters are filled in by the filter.  ``innovation`` and ``jacobian``
+    are computed on first use only, so a constant strategy costs nothing.
+    """
+
+    def __init__(
+        self,
+        *,
+        k: int,
+        pred_mean: np.ndarray,
+        propagated_cov: np.ndarray,
+        process_cov: np.ndarray,
+        z: np.ndarray,
+        measurement: Any,
+        trial_update: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+    ) -> None:
+        self.k = k
+        self.pred_mean = pred_mean
+        self.propagated_cov = propagated_cov
+        self.process_cov = process_cov
+        self.z = z
+        self.measurement = measurement
+        self._trial_update = trial_update
+
+    @cached_property
+    def predicted_measurement(self) -> np.ndarray:
+        """h(x̂⁻_k), ``(*batch, m)``."""
+        return self.measurement.h(self.pred_mean, self.k)
+
+    @cached_property
+    def innovation(self) -> np.ndarray:
+        """z_k − h(x̂⁻_k), ``(*batch, m)``; NaN where z is missing."""
+        res = getattr(self.measurement, "residual", None)
+        zp = self.predicted_measurement
+        return res(self.z, zp) if res is not None else self.z - zp
+
+    @cached_property
+    def jacobian(self) -> np.ndarray:
+        """H_k = ∂h/∂x at x̂⁻_k: ``(m, n)`` or ``(*batch, m, n)``."""
+        from .gaussian import measurement_jacobian
+
+        return measurement_jacobian(self.measurement, self.pred_mean, self.k)
+
+    def trial_update(self, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The filter's update with ``P⁻ = lam·P̄ + Q``: returns (mean, cov)."""
+        return self._trial_update(np.asarray(lam, dtype=float))
+
+
+class FadingStrategy(Protocol):
+    """Protocol of a fading strategy (see the module docstring)."""
+
+    data_independent: bool
+
+    def init(self, batch: tuple[int, ...]) -> Any: ...
+
+    def factor(self, memory: Any, ctx: FadingContext) -> tuple[Fade, Any]: ...
+
+
+@dataclass(frozen=True)
+class Constant:
+    """Constant fading factor λ (TFMKF when λ > 1; the plain filter when λ = 1).
+
+    Parameters
+    ----------
+    lam
+        Fading factor, at least 1.  Paper P2's TFMKF uses 1.23.
+    """
+
+    lam: float = 1.0
+    data_independent: bool = field(default=True, init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "lam", in_range("lam", self.lam, 1.0, np.inf, high_open=True))
+
+    def init(self, batch: tuple[int, ...]) -> None:
+        """No memory."""
+        return None
+
+    def factor(self, memory: None, ctx: FadingContext) -> tuple[Fade, None]:
+        """λ for every run and step."""
+        return Fade(np.float64(self.lam)), None
+
+
+NoFading = Constant(1.0)
+"""The plain filter: λ = 1 at every step."""

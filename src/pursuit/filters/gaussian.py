@@ -1,0 +1,506 @@
+"""Gaussian filters: Kalman (KF), extended (EKF), unscented (UKF) and cubature (CKF).
+
+All four share one predict-fade-update cycle and differ only in how they
+propagate a Gaussian through the motion model and the measurement model:
+
+* KF and EKF linearise (exactly for the KF) and use the Joseph-form update
+  ``P = (I − K H) P⁻ (I − K H)ᵀ + K R Kᵀ``;
+* UKF and CKF use sigma points and ``P = P⁻ − K S Kᵀ``.
+
+Every ``step`` returns ``(state, info)`` with the same info keys in every
+filter:
+
+``innovation`` (*b, m)
+    z_k − ẑ_k; NaN where the measurement component is missing.
+``S`` (*b, m, m)
+    Innovation covariance.  Missing components are decoupled and given unit
+    variance, so they add nothing to NIS or the log-likelihood.
+``nis`` (*b,)
+    Normalised innovation squared νᵀ S⁻¹ ν over the measured components;
+    NaN when nothing was measured.
+``dof`` (*b,)
+    Number of measured components (the χ² degrees of freedom of NIS).
+``loglik`` (*b,)
+    log N(ν; 0, S) over the measured components (0 when nothing was
+    measured): the log marginal likelihood increment of the step.
+``fading`` (*b,)
+    λ_k used in the predict step.
+``repaired`` (*b,)
+    True where a covariance had to be repaired to stay positive definite.
+``pred_mean``, ``pred_cov``, ``cross_cov``
+    Predicted mean and covariance and cov(x_{k−1}, x⁻_k), kept by
+    :func:`pursuit.run` only when asked, for the RTS smoother.
+
+A NaN measurement means predict only: every component NaN gives the
+predicted mean and covariance unchanged.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, mv, numerical_jacobian, quad, symmetrize
+from .._validation import in_range, nonnegative
+from ..gaussian import Gaussian
+from ..rng import RNGLike
+from .fading import Constant, Fade, FadingContext, FadingStrategy, NoFading
+
+__all__ = [
+    "GaussianState",
+    "KalmanFilter",
+    "ExtendedKalmanFilter",
+    "UnscentedKalmanFilter",
+    "CubatureKalmanFilter",
+    "motion_jacobian",
+    "measurement_jacobian",
+]
+
+_LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+@dataclass(frozen=True)
+class GaussianState:
+    """State of a Gaussian filter.
+
+    Attributes
+    ----------
+    mean
+        ``(*batch, n)`` filtered mean.
+    cov
+        ``(*batch, n, n)`` filtered covariance.  When every run has the same
+        covariance (a linear model, a shared prior and the same missing
+        measurements) this is a read-only broadcast view of one matrix.
+    k
+        Index of the last step processed (0 for the prior).
+    memory
+        The fading strategy's memory.
+    """
+
+    mean: np.ndarray
+    cov: np.ndarray
+    k: int = 0
+    memory: Any = None
+
+    @property
+    def batch(self) -> tuple[int, ...]:
+        """Batch shape."""
+        return self.mean.shape[:-1]
+
+
+# --------------------------------------------------------------------------
+# model helpers
+# --------------------------------------------------------------------------
+def _call(fn, *args, dt=None):
+    return fn(*args) if dt is None else fn(*args, dt=dt)
+
+
+def motion_jacobian(motion: Any, x: np.ndarray, k: int, dt: float | None = None) -> np.ndarray:
+    """∂f/∂x at ``x``: the model's own Jacobian, else central differences."""
+    jac = getattr(motion, "jacobian", None)
+    if jac is not None:
+        return np.asarray(_call(jac, x, k, dt=dt), dtype=float)
+    return numerical_jacobian(lambda xs: _call(motion.f, xs, k, dt=dt), x)
+
+
+def measurement_jacobian(measurement: Any, x: np.ndarray, k: int) -> np.ndarray:
+    """∂h/∂x at ``x``: the model's own Jacobian, else central differences."""
+    jac = getattr(measurement, "jacobian", None)
+    if jac is not None:
+        return np.asarray(jac(x, k), dtype=float)
+    return numerical_jacobian(lambda xs: measurement.h(xs, k), x)
+
+
+def _residual(measurement: Any, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    res = getattr(measurement, "residual", None)
+    return res(a, b) if res is not None else a - b
+
+
+def _core(P: np.ndarray) -> np.ndarray:
+    """One matrix if ``P`` is a broadcast of it over the batch, else ``P``."""
+    if P.ndim > 2 and is_shared(P, 2):
+        return P[(0,) * (P.ndim - 2)]
+    return P
+
+
+def _t(A: np.ndarray) -> np.ndarray:
+    return np.swapaxes(A, -1, -2)
+
+
+# --------------------------------------------------------------------------
+# the shared cycle
+# --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Prediction:
+    mean: np.ndarray  # (*b, n)
+    propagated: np.ndarray  # P̄ without Q: (n, n) or (*b, n, n)
+    Q: np.ndarray
+    cross: np.ndarray  # cov(x_{k-1}, x⁻_k) without fading
+    repaired: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class _Measured:
+    zp: np.ndarray  # predicted measurement (*b, m)
+    Pzz: np.ndarray  # H P⁻ Hᵀ or its sigma-point analogue, without R
+    Pxz: np.ndarray  # P⁻ Hᵀ or the sigma-point cross-covariance
+    H: np.ndarray | None  # linearisation for the Joseph form (None for sigma-point filters)
+    repaired: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class _GaussianFilter:
+    """Shared predict-fade-update cycle; subclasses give the two transforms."""
+
+    motion: Any
+    measurement: Any
+    fading: FadingStrategy = NoFading
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        for attr in ("f", "cov"):
+            if not callable(getattr(self.motion, attr, None)):
+                raise TypeError(f"motion model {type(self.motion).__name__} has no method {attr}()")
+        for attr in ("h", "cov"):
+            if not callable(getattr(self.measurement, attr, None)):
+                raise TypeError(f"measurement model {type(self.measurement).__name__} has no method {attr}()")
+        if isinstance(self.fading, (int, float)):
+            object.__setattr__(self, "fading", Constant(float(self.fading)))
+        if not self.name:
+            object.__setattr__(self, "name", self._default_name())
+
+    def _default_name(self) -> str:
+        return type(self).__name__
+
+    # -- public API ---------------------------------------------------------
+    def init(self, prior: Gaussian, batch: tuple[int, ...] = (), rng: RNGLike = None) -> GaussianState:
+        """Initial state from a Gaussian prior, for a batch of runs.
+
+        ``rng`` is accepted for a uniform interface; Gaussian filters draw
+        nothing.
+        """
+        if not isinstance(prior, Gaussian):
+            prior = Gaussian(*prior)
+        batch = tuple(batch)
+        if prior.mean.ndim > 1 and not batch:
+            batch = prior.mean.shape[:-1]
+        mean, cov = prior.broadcast(batch)
+        return GaussianState(mean=mean, cov=cov, k=0, memory=self.fading.init(batch))
+
+    def step(
+        self, state: GaussianState, z: np.ndarray, k: int | None = None, dt: float | None = None
+    ) -> tuple[GaussianState, dict[str, np.ndarray]]:
+        """One predict-fade-update cycle with measurement ``z`` (``(*batch, m)``).
+
+        Parameters
+        ----------
+        state
+            State after step ``k − 1``.
+        z
+            Measurement; NaN entries are missing (all NaN: predict only).
+        k
+            Step index (default ``state.k + 1``), passed to the models.
+        dt
+            Time since the previous step, for irregular sampling (default:
+            the motion model's own ``dt``).
+        """
+        k = state.k + 1 if k is None else int(k)
+        batch = state.batch
+        z = np.asarray(z, dtype=float)
+        if z.shape[:-1] != batch:
+            z = np.broadcast_to(z, (*batch, z.shape[-1]))
+        if np.isinf(z).any():
+            raise ValueError(f"step {k}: measurement contains infinity (use NaN for a missing value)")
+
+        P = _core(state.cov)
+        pred = self._predict(state.mean, P, k, dt)
+        ctx = FadingContext(
+            k=k,
+            pred_mean=pred.mean,
+            propagated_cov=pred.propagated,
+            process_cov=pred.Q,
+            z=z,
+            measurement=self.measurement,
+            trial_update=lambda lam: self._trial(pred, lam, z, k),
+        )
+        fade, memory = self.fading.factor(state.memory, ctx)
+        lam = np.asarray(fade.lam, dtype=float)
+        P_pred = _scale(lam, pred.propagated) + pred.Q
+
+        valid = ~np.isnan(z)
+        if fade.skip is not None:
+            valid = valid & ~np.asarray(fade.skip, dtype=bool)[..., None]
+        meas = self._measure(pred.mean, P_pred, k)
+        mean, cov, info = _update(pred.mean, P_pred, z, valid, meas, self.measurement, k)
+
+        if cov.ndim == 2 and batch:
+            cov = np.broadcast_to(cov, (*batch, *cov.shape))
+        info["fading"] = np.broadcast_to(lam, batch)
+        info["repaired"] = _any_repaired(batch, pred.repaired, meas.repaired)
+        info["pred_mean"] = pred.mean
+        info["pred_cov"] = P_pred
+        info["cross_cov"] = pred.cross
+        for key, value in fade.info.items():
+            info[key] = value
+        return GaussianState(mean=mean, cov=cov, k=k, memory=memory), info
+
+    # -- hooks --------------------------------------------------------------
+    def _predict(self, x: np.ndarray, P: np.ndarray, k: int, dt: float | None) -> _Prediction:
+        raise NotImplementedError
+
+    def _measure(self, x_pred: np.ndarray, P_pred: np.ndarray, k: int) -> _Measured:
+        raise NotImplementedError
+
+    def _trial(self, pred: _Prediction, lam: np.ndarray, z: np.ndarray, k: int):
+        P_pred = _scale(lam, pred.propagated) + pred.Q
+        meas = self._measure(pred.mean, P_pred, k)
+        mean, cov, _ = _update(pred.mean, P_pred, z, ~np.isnan(z), meas, self.measurement, k)
+        return mean, cov
+
+
+def _scale(lam: np.ndarray, P: np.ndarray) -> np.ndarray:
+    if lam.ndim == 0:
+        return P if lam == 1.0 else lam * P
+    return lam[..., None, None] * P
+
+
+def _any_repaired(batch, *flags) -> np.ndarray:
+    out = np.zeros(batch, dtype=bool)
+    for f in flags:
+        if f is not None:
+            out = out | np.broadcast_to(f, batch)
+    return out
+
+
+def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k):
+    """Kalman measurement update with missing components masked out."""
+    R = np.asarray(measurement.cov(k), dtype=float)
+    m = R.shape[-1]
+    batch = x_pred.shape[:-1]
+    nu_full = _residual(measurement, z, meas.zp)
+    Pzz, Pxz, H = meas.Pzz, meas.Pxz, meas.H
+
+    if valid.all():
+        nu = nu_full
+        R_eff = R
+        dof = np.full(batch, m)
+    else:
+        # A missing component gets zero innovation, no coupling and unit
+        # variance: its Kalman gain column is then exactly zero.
+        if valid.ndim > 1 and (valid == valid.reshape(-1, m)[0]).all():
+            valid = valid.reshape(-1, m)[0]  # same pattern in every run: stay shared
+        vv = valid[..., :, None] & valid[..., None, :]
+        nu = np.where(valid, nu_full, 0.0)
+        Pzz = np.where(vv, Pzz, 0.0)
+        Pxz = Pxz * valid[..., None, :]
+        R_eff = np.where(vv, R, 0.0) + np.eye(m) * (~valid)[..., None, :]
+        if H is not None:
+            H = H * valid[..., :, None]
+        dof = np.broadcast_to(valid.sum(axis=-1), batch)
+
+    S = symmetrize(Pzz + R_eff)
+    S_inv = inv_spd(S)
+    K = Pxz @ S_inv
+    mean = x_pred + mv(K, nu)
+    if H is not None:
+        n = x_pred.shape[-1]
+        A = np.eye(n) - K @ H
+        cov = A @ P_pred @ _t(A) + K @ R_eff @ _t(K)
+    else:
+        cov = P_pred - K @ S @ _t(K)
+    cov = symmetrize(cov)
+
+    nis = quad(nu, S_inv)
+    loglik = -0.5 * (nis + logdet_spd(S) + dof * _LOG_2PI)
+    measured = dof > 0
+    nis = np.where(measured, nis, np.nan)
+    loglik = np.where(measured, loglik, 0.0)
+    innovation = np.where(valid, nu_full, np.nan) if not np.all(valid) else nu_full
+    info = {
+        "innovation": np.broadcast_to(innovation, (*batch, m)),
+        "S": np.broadcast_to(S, (*batch, m, m)),
+        "nis": np.broadcast_to(nis, batch),
+        "dof": np.broadcast_to(dof, batch),
+        "loglik": np.broadcast_to(loglik, batch),
+    }
+    return mean, cov, info
+
+
+# --------------------------------------------------------------------------
+# KF and EKF
+# --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ExtendedKalmanFilter(_GaussianFilter):
+    """Extended Kalman filter with Joseph-form update.
+
+    Parameters
+    ----------
+    motion, measurement
+        Model objects (see :mod:`pursuit.models`).  Missing ``jacobian``
+        methods are replaced by central differences.
+    fading
+        Fading strategy for the predict step, or a number (constant λ).
+    name
+        Label used in results and reports.
+    """
+
+    def _default_name(self) -> str:
+        return "EKF"
+
+    def _predict(self, x, P, k, dt):
+        F = motion_jacobian(self.motion, x, k, dt)
+        mean = np.asarray(_call(self.motion.f, x, k, dt=dt), dtype=float)
+        PFt = P @ _t(F)
+        return _Prediction(mean, F @ PFt, np.asarray(_call(self.motion.cov, k, dt=dt), dtype=float), PFt)
+
+    def _measure(self, x_pred, P_pred, k):
+        H = measurement_jacobian(self.measurement, x_pred, k)
+        zp = np.asarray(self.measurement.h(x_pred, k), dtype=float)
+        PHt = P_pred @ _t(H)
+        return _Measured(zp, H @ PHt, PHt, H)
+
+
+@dataclass(frozen=True)
+class KalmanFilter(ExtendedKalmanFilter):
+    """Linear Kalman filter with Joseph-form update.
+
+    Needs a linear motion model (``transition_matrix(k, dt)``) and a linear
+    measurement model (``matrix(k)``).  While all runs share one covariance
+    (same prior covariance, same missing-measurement pattern, a
+    data-independent fading strategy) the Riccati recursion is computed once
+    for the whole batch, which is exact and makes large batches cheap.
+    """
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not callable(getattr(self.motion, "transition_matrix", None)):
+            raise TypeError(
+                f"KalmanFilter needs a linear motion model with transition_matrix(); "
+                f"{type(self.motion).__name__} has none (use ExtendedKalmanFilter)"
+            )
+        if not callable(getattr(self.measurement, "matrix", None)):
+            raise TypeError(
+                f"KalmanFilter needs a linear measurement model with matrix(); "
+                f"{type(self.measurement).__name__} has none (use ExtendedKalmanFilter)"
+            )
+
+    def _default_name(self) -> str:
+        return "KF"
+
+    def _predict(self, x, P, k, dt):
+        F = np.asarray(_call(self.motion.transition_matrix, k, dt=dt), dtype=float)
+        PFt = P @ F.T
+        return _Prediction(mv(F, x), F @ PFt, np.asarray(_call(self.motion.cov, k, dt=dt), dtype=float), PFt)
+
+    def _measure(self, x_pred, P_pred, k):
+        H = np.asarray(self.measurement.matrix(k), dtype=float)
+        PHt = P_pred @ H.T
+        return _Measured(mv(H, x_pred), H @ PHt, PHt, H)
+
+
+# --------------------------------------------------------------------------
+# sigma-point filters
+# --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _SigmaPointFilter(_GaussianFilter):
+    def _unit_points(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Unit sigma points ``(p, n)`` and mean / covariance weights ``(p,)``."""
+        raise NotImplementedError
+
+    def _points(self, x, P):
+        xi, wm, wc = self._unit_points(x.shape[-1])
+        L, repaired = cholesky_psd(P)
+        chi = x[..., None, :] + np.einsum("...ij,pj->...pi", L, xi)
+        return chi, wm, wc, repaired
+
+    def _predict(self, x, P, k, dt):
+        chi, wm, wc, repaired = self._points(x, P)
+        Y = np.asarray(_call(self.motion.f, chi, k, dt=dt), dtype=float)
+        mean = np.einsum("p,...pi->...i", wm, Y)
+        dY = Y - mean[..., None, :]
+        dX = chi - x[..., None, :]
+        propagated = symmetrize(_t(dY * wc[:, None]) @ dY)
+        cross = _t(dX * wc[:, None]) @ dY
+        Q = np.asarray(_call(self.motion.cov, k, dt=dt), dtype=float)
+        return _Prediction(mean, propagated, Q, cross, repaired)
+
+    def _measure(self, x_pred, P_pred, k):
+        chi, wm, wc, repaired = self._points(x_pred, P_pred)
+        Z = np.asarray(self.measurement.h(chi, k), dtype=float)
+        # Average residuals about the central point so that angles are
+        # averaged on the circle, not across the ±π cut.
+        Z0 = Z[..., :1, :]
+        dZ0 = _residual(self.measurement, Z, Z0)
+        zp = Z0[..., 0, :] + np.einsum("p,...pi->...i", wm, dZ0)
+        dZ = _residual(self.measurement, Z, zp[..., None, :])
+        dX = chi - x_pred[..., None, :]
+        Pzz = _t(dZ * wc[:, None]) @ dZ
+        Pxz = _t(dX * wc[:, None]) @ dZ
+        return _Measured(zp, Pzz, Pxz, None, repaired)
+
+
+@dataclass(frozen=True)
+class UnscentedKalmanFilter(_SigmaPointFilter):
+    """Unscented Kalman filter with the scaled unscented transform.
+
+    Parameters
+    ----------
+    motion, measurement, fading, name
+        As :class:`ExtendedKalmanFilter`.
+    alpha, beta, kappa
+        Sigma-point spread, prior-knowledge and secondary scaling parameters
+        (defaults 1, 2, 0: weights are non-negative for any n).  With
+        λ_ut = α²(n + κ) − n the points are x ± √(n + λ_ut)·(columns of
+        chol P), W₀ᵐ = λ_ut/(n + λ_ut), W₀ᶜ = W₀ᵐ + 1 − α² + β,
+        Wᵢ = 1/(2(n + λ_ut)).
+
+    Notes
+    -----
+    Sigma points are redrawn from the predicted Gaussian before the
+    measurement update.
+    """
+
+    alpha: float = 1.0
+    beta: float = 2.0
+    kappa: float = 0.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        in_range("alpha", self.alpha, 0.0, 1.0e3, low_open=True)
+        nonnegative("beta", self.beta)
+        in_range("kappa", self.kappa, -1.0e6, 1.0e6)
+
+    def _default_name(self) -> str:
+        return "UKF"
+
+    def _unit_points(self, n):
+        lam = self.alpha**2 * (n + self.kappa) - n
+        c = n + lam
+        if c <= 0:
+            raise ValueError(f"UKF: alpha={self.alpha}, kappa={self.kappa} give n + lambda = {c:.3g} <= 0 for n = {n}")
+        scale = np.sqrt(c)
+        xi = np.vstack([np.zeros(n), scale * np.eye(n), -scale * np.eye(n)])
+        wm = np.full(2 * n + 1, 0.5 / c)
+        wc = wm.copy()
+        wm[0] = lam / c
+        wc[0] = lam / c + 1.0 - self.alpha**2 + self.beta
+        return xi, wm, wc
+
+
+@dataclass(frozen=True)
+class CubatureKalmanFilter(_SigmaPointFilter):
+    """Cubature Kalman filter (third-degree spherical-radial rule).
+
+    ``2n`` points x ± √n·(columns of chol P), each with weight 1/(2n).
+    """
+
+    def _default_name(self) -> str:
+        return "CKF"
+
+    def _unit_points(self, n):
+        scale = np.sqrt(n)
+        xi = np.vstack([scale * np.eye(n), -scale * np.eye(n)])
+        w = np.full(2 * n, 0.5 / n)
+        return xi, w, w

@@ -1,0 +1,15 @@
+"""Motion and measurement models, vectorised over any leading batch axes."""
+
+from .measurement import LinearGaussian, RangeBearing, RangeSensors, TimeOfArrival, gaussian_loglik, wrap_angle
+from .motion import ConstantAcceleration, ConstantVelocity
+
+__all__ = [
+    "ConstantVelocity",
+    "ConstantAcceleration",
+    "LinearGaussian",
+    "RangeSensors",
+    "RangeBearing",
+    "TimeOfArrival",
+    "gaussian_loglik",
+    "wrap_angle",
+]

@@ -1,0 +1,254 @@
+"""Named, documented, validated building blocks for configs and the CLI.
+
+Every scenario, filter, fading strategy and experiment kind that a TOML file
+can name is registered here with its parameters.  A parameter declares its
+type, its default and a check, so the config loader can refuse an unknown
+key, a wrong type or an impossible value with one line naming the field,
+before anything runs or is written.
+
+Modules register their own components with :func:`register`; the modules
+listed in ``_COMPONENT_MODULES`` are imported on first use.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+__all__ = ["Param", "Component", "register", "get", "components", "REQUIRED", "KINDS"]
+
+KINDS = ("scenario", "filter", "fading", "experiment", "model")
+
+# Modules whose import registers components.  Add a line when you add one.
+_COMPONENT_MODULES = (
+    "pursuit.components.models",
+    "pursuit.components.scenarios",
+    "pursuit.components.filters",
+    "pursuit.components.experiments",
+)
+
+
+class _Required:
+    def __repr__(self) -> str:
+        return "REQUIRED"
+
+
+REQUIRED: Any = _Required()
+
+
+@dataclass(frozen=True)
+class Param:
+    """One configurable parameter.
+
+    Attributes
+    ----------
+    name
+        Key in the TOML table.
+    type
+        ``"float"``, ``"int"``, ``"bool"``, ``"str"``, ``"vector"``,
+        ``"matrix"``, ``"table"`` or ``"any"``.
+    default
+        Default value, or :data:`REQUIRED`.
+    doc
+        One line for ``pursuit list`` and the docs.
+    check
+        Optional ``check(field, value) -> value`` that converts and raises
+        ``ValueError`` naming the field when the value is impossible.
+    choices
+        Allowed values for a ``"str"`` parameter.
+    """
+
+    name: str
+    type: str
+    default: Any = REQUIRED
+    doc: str = ""
+    check: Callable[[str, Any], Any] | None = None
+    choices: tuple[Any, ...] | None = None
+
+    def convert(self, field_name: str, value: Any) -> Any:
+        """Type-check and convert a TOML value; raises ``ValueError``."""
+        v = _TYPE_CHECKS[self.type](field_name, value)
+        if self.choices is not None and v not in self.choices:
+            opts = ", ".join(repr(c) for c in self.choices)
+            raise ValueError(f"{field_name}: must be one of {opts}, got {value!r}")
+        if self.check is not None:
+            v = self.check(field_name, v)
+        return v
+
+
+@dataclass(frozen=True)
+class Component:
+    """A registered building block.
+
+    ``build(**params, **context)`` makes the object; ``context`` holds what
+    the kind needs beyond the TOML values (a filter gets the scenario).
+    """
+
+    kind: str
+    name: str
+    summary: str
+    params: tuple[Param, ...]
+    build: Callable[..., Any]
+    aliases: tuple[str, ...] = field(default_factory=tuple)
+
+    def param(self, name: str) -> Param | None:
+        """The parameter called ``name``, if any."""
+        for p in self.params:
+            if p.name == name:
+                return p
+        return None
+
+    def resolve(self, values: dict[str, Any], where: str) -> dict[str, Any]:
+        """Check a table of values against the parameters; returns converted values with defaults.
+
+        ``where`` prefixes field names in errors (``"filters[2]"``).
+        """
+        known = {p.name for p in self.params}
+        for key in values:
+            if key not in known:
+                hint = ", ".join(sorted(known)) or "none"
+                raise ValueError(f"{where}.{key}: unknown key for {self.kind} '{self.name}' (known: {hint})")
+        out: dict[str, Any] = {}
+        for p in self.params:
+            field_name = f"{where}.{p.name}"
+            if p.name in values:
+                out[p.name] = p.convert(field_name, values[p.name])
+            elif p.default is REQUIRED:
+                raise ValueError(f"{field_name}: required for {self.kind} '{self.name}'")
+            else:
+                out[p.name] = p.default
+        return out
+
+
+_REGISTRY: dict[str, dict[str, Component]] = {k: {} for k in KINDS}
+_loaded = False
+
+
+def register(
+    kind: str, name: str, summary: str, params: Sequence[Param] = (), aliases: Sequence[str] = ()
+) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """Decorator registering ``build`` as component ``name`` of ``kind``."""
+    if kind not in KINDS:
+        raise ValueError(f"unknown component kind {kind!r}")
+
+    def deco(build: Callable[..., Any]) -> Callable[..., Any]:
+        comp = Component(kind, name, summary, tuple(params), build, tuple(aliases))
+        table = _REGISTRY[kind]
+        for key in (name, *aliases):
+            if key in table and table[key].build is not build:
+                raise ValueError(f"{kind} {key!r} is registered twice")
+            table[key] = comp
+        return build
+
+    return deco
+
+
+def _load() -> None:
+    global _loaded
+    if not _loaded:
+        _loaded = True
+        for mod in _COMPONENT_MODULES:
+            importlib.import_module(mod)
+
+
+def get(kind: str, name: str, where: str = "") -> Component:
+    """Look up a component; raises ``ValueError`` naming the field when unknown."""
+    _load()
+    table = _REGISTRY[kind]
+    if not isinstance(name, str) or name not in table:
+        prefix = f"{where}: " if where else ""
+        known = ", ".join(sorted({c.name for c in table.values()}))
+        raise ValueError(f"{prefix}unknown {kind} {name!r} (known: {known})")
+    return table[name]
+
+
+def components(kind: str) -> list[Component]:
+    """Registered components of a kind, without alias duplicates, sorted by name."""
+    _load()
+    seen: dict[str, Component] = {}
+    for comp in _REGISTRY[kind].values():
+        seen[comp.name] = comp
+    return [seen[k] for k in sorted(seen)]
+
+
+# --------------------------------------------------------------------------
+# TOML type checks
+# --------------------------------------------------------------------------
+def _float(field_name: str, v: Any) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError(f"{field_name}: expected a number, got {_show(v)}")
+    f = float(v)
+    if not np.isfinite(f):
+        raise ValueError(f"{field_name}: must be finite, got {v!r}")
+    return f
+
+
+def _int(field_name: str, v: Any) -> int:
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise ValueError(f"{field_name}: expected an integer, got {_show(v)}")
+    return int(v)
+
+
+def _bool(field_name: str, v: Any) -> bool:
+    if not isinstance(v, bool):
+        raise ValueError(f"{field_name}: expected true or false, got {_show(v)}")
+    return v
+
+
+def _str(field_name: str, v: Any) -> str:
+    if not isinstance(v, str):
+        raise ValueError(f"{field_name}: expected a string, got {_show(v)}")
+    return v
+
+
+def _vector(field_name: str, v: Any) -> np.ndarray:
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        v = [v]
+    if not isinstance(v, list) or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+        raise ValueError(f"{field_name}: expected a list of numbers, got {_show(v)}")
+    arr = np.array(v, dtype=float)
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{field_name}: must be finite")
+    return arr
+
+
+def _matrix(field_name: str, v: Any) -> np.ndarray:
+    """A matrix as a list of rows; a number or a flat list is accepted for diagonal covariances."""
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return np.array(float(v))
+    if isinstance(v, list) and v and all(isinstance(r, list) for r in v):
+        rows = [_vector(f"{field_name}[{i}]", r) for i, r in enumerate(v)]
+        if len({len(r) for r in rows}) != 1:
+            raise ValueError(f"{field_name}: rows have different lengths")
+        return np.array(rows)
+    return _vector(field_name, v)
+
+
+def _table(field_name: str, v: Any) -> dict:
+    if not isinstance(v, dict):
+        raise ValueError(f"{field_name}: expected a table, got {_show(v)}")
+    return v
+
+
+def _any(field_name: str, v: Any) -> Any:
+    return v
+
+
+_TYPE_CHECKS: dict[str, Callable[[str, Any], Any]] = {
+    "float": _float,
+    "int": _int,
+    "bool": _bool,
+    "str": _str,
+    "vector": _vector,
+    "matrix": _matrix,
+    "table": _table,
+    "any": _any,
+}
+
+
+def _show(v: Any) -> str:
+    kind = {str: "a string", bool: "a boolean", list: "a list", dict: "a table", int: "an integer", float: "a number"}
+    return f"{kind.get(type(v), type(v).__name__)} ({v!r})" if not isinstance(v, (list, dict)) else kind[type(v)]

@@ -1,0 +1,131 @@
+"""Writing an experiment's output folder, all or nothing, and formatting tables."""
+
+from __future__ import annotations
+
+import csv
+import json
+import platform
+import shutil
+import sys
+import tempfile
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..experiment import ExperimentOutput, Table
+
+__all__ = ["write_output", "format_table", "versions"]
+
+
+def versions() -> dict[str, str]:
+    """Versions of Python, the platform and pursuit's dependencies."""
+    import matplotlib
+    import scipy
+
+    from .. import __version__
+
+    return {
+        "pursuit": __version__,
+        "python": sys.version.split()[0],
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "matplotlib": matplotlib.__version__,
+        "platform": platform.platform(),
+        "machine": platform.machine(),
+        "processor": platform.processor() or "unknown",
+    }
+
+
+def _cell(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, (float, np.floating)):
+        if not np.isfinite(v):
+            return str(v)
+        a = abs(float(v))
+        if a != 0 and (a < 1e-3 or a >= 1e6):
+            return f"{v:.4e}"
+        return f"{v:.4f}"
+    return str(v)
+
+
+def format_table(table: Table) -> str:
+    """A table as aligned plain text, with its title and notes."""
+    cells = [[_cell(v) for v in row] for row in table.rows]
+    widths = [max([len(c)] + [len(r[i]) for r in cells]) for i, c in enumerate(table.columns)]
+    lines = [table.title] if table.title else []
+    lines.append("  ".join(c.ljust(w) for c, w in zip(table.columns, widths)))
+    lines.append("  ".join("-" * w for w in widths))
+    for r in cells:
+        lines.append("  ".join(v.rjust(w) if _numeric(v) else v.ljust(w) for v, w in zip(r, widths)))
+    if table.notes:
+        lines.append(table.notes)
+    return "\n".join(lines)
+
+
+def _numeric(s: str) -> bool:
+    try:
+        float(s)
+        return True
+    except ValueError:
+        return False
+
+
+def _write_csv(path: Path, table: Table) -> None:
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(table.columns)
+        for row in table.rows:
+            w.writerow(["" if v is None else (repr(float(v)) if isinstance(v, (float, np.floating)) else v) for v in row])
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, Path):
+        return str(o)
+    if isinstance(o, datetime):
+        return o.isoformat()
+    return repr(o)
+
+
+def write_output(output: ExperimentOutput, out_dir: str | Path, *, formats: tuple[str, ...] = ("png",)) -> Path:
+    """Write tables (CSV), figures and the ``run.json`` sidecar into ``out_dir``.
+
+    Everything is written into a temporary folder beside ``out_dir`` and
+    moved into place only when complete, so an error leaves either the
+    previous output or nothing, never a half-written folder.
+    """
+    out_dir = Path(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    try:
+        for table in output.tables:
+            _write_csv(tmp / f"{table.name}.csv", table)
+        if output.figures:
+            (tmp / "figures").mkdir()
+            for name, fig in output.figures.items():
+                for fmt in formats:
+                    fig.savefig(tmp / "figures" / f"{name}.{fmt}", dpi=150)
+        sidecar = dict(output.sidecar)
+        sidecar.setdefault("experiment", output.name)
+        sidecar["written"] = datetime.now(timezone.utc)
+        sidecar["versions"] = versions()
+        sidecar["tables"] = {t.name: {"title": t.title, "columns": t.columns, "rows": t.rows} for t in output.tables}
+        sidecar["figures"] = sorted(output.figures)
+        (tmp / "run.json").write_text(json.dumps(sidecar, indent=2, default=_json_default) + "\n")
+        old = None
+        if out_dir.exists():
+            old = out_dir.with_name(f".{out_dir.name}.old-{tmp.name.rsplit('.', 1)[-1]}")
+            out_dir.rename(old)
+        tmp.rename(out_dir)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out_dir

@@ -1,0 +1,7 @@
+"""Scenario simulators: seeded truth and measurements for Monte Carlo runs."""
+
+from .base import Simulation, simulate_markov
+from .linear import LinearCV
+from .wsn import WSNRange
+
+__all__ = ["Simulation", "simulate_markov", "WSNRange", "LinearCV"]

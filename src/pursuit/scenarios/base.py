@@ -1,0 +1,75 @@
+"""What a scenario is: a seeded simulator of truth and measurements.
+
+A scenario is any object with
+
+* ``name``, ``steps`` (K), ``dt``;
+* ``state_labels``: one label per state component (``("x", "vx", ...)``);
+* ``position_indices`` and ``velocity_indices`` (either may be empty);
+* ``motion`` and ``measurement``: the models a matched filter should use;
+* ``simulate(rng, runs) -> Simulation``.
+
+Scenarios know nothing of filters.  ``simulate`` must draw all of run i's
+randomness from row i of ``rng`` when ``rng`` is a :class:`pursuit.RunStreams`,
+so that a run's truth and measurements do not depend on how runs are
+chunked.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..gaussian import Gaussian
+
+__all__ = ["Simulation", "simulate_markov"]
+
+
+@dataclass(frozen=True)
+class Simulation:
+    """Truth and measurements for a batch of runs.
+
+    Attributes
+    ----------
+    truth
+        ``(K, M, n)`` true states at steps 1..K.
+    measurements
+        ``(K, M, m)`` measurements; NaN = missing.
+    prior
+        The filters' prior: a :class:`pursuit.Gaussian` whose mean may be
+        ``(M, n)`` (one initial estimate per run).
+    times
+        ``(K,)`` measurement times in seconds.
+    extra
+        Scenario-specific arrays (for figures), keyed by name.
+    """
+
+    truth: np.ndarray
+    measurements: np.ndarray
+    prior: Gaussian
+    times: np.ndarray
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def runs(self) -> int:
+        """Number of runs M."""
+        return self.truth.shape[1]
+
+
+def simulate_markov(motion, measurement, x0: np.ndarray, steps: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """Roll a Markov model forward: truth ``(K, *b, n)`` and measurements ``(K, *b, m)``.
+
+    Draw order per run and step: process noise, then measurement noise.
+    """
+    x = np.asarray(x0, dtype=float)
+    truth = np.empty((steps, *x.shape))
+    zs = None
+    for i in range(steps):
+        k = i + 1
+        x = motion.sample(x, k, rng)
+        z = measurement.sample(x, k, rng)
+        if zs is None:
+            zs = np.empty((steps, *z.shape))
+        truth[i] = x
+        zs[i] = z
+    return truth, zs

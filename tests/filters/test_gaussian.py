@@ -1,0 +1,225 @@
+"""Cross-checks of the Gaussian filters against hand calculations and each other."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import pursuit as pu
+from pursuit.engine.montecarlo import monte_carlo
+from pursuit.models import ConstantAcceleration, ConstantVelocity, LinearGaussian
+from pursuit.scenarios import LinearCV
+
+
+@dataclass(frozen=True)
+class RandomWalk:
+    """A user-style 1-D random walk model: no subclassing, just the method names."""
+
+    q: float
+
+    def transition_matrix(self, k=None, dt=None):
+        return np.array([[1.0]])
+
+    def f(self, x, k=None, dt=None):
+        return x
+
+    def cov(self, k=None, dt=None):
+        return np.array([[self.q]])
+
+
+def test_kalman_filter_matches_a_hand_calculation():
+    # prior N(0, 1), random walk q = 1, measurement noise r = 2, z = 3:
+    # P- = 2, S = 4, K = 1/2, x = 1.5, P = 1, NIS = 9/4
+    kf = pu.KalmanFilter(RandomWalk(1.0), LinearGaussian([[1.0]], [[2.0]]))
+    state = kf.init(pu.Gaussian([0.0], [[1.0]]))
+    state, info = kf.step(state, np.array([3.0]))
+    assert state.mean == pytest.approx([1.5], abs=1e-15)
+    assert state.cov[0, 0] == pytest.approx(1.0, abs=1e-15)
+    assert info["innovation"] == pytest.approx([3.0])
+    assert info["S"][0, 0] == pytest.approx(4.0)
+    assert info["nis"] == pytest.approx(2.25)
+    assert info["loglik"] == pytest.approx(-0.5 * (2.25 + np.log(4.0) + np.log(2 * np.pi)))
+    # second step, z = 0: P- = 2, S = 4, K = 1/2, x = 0.75, P = 1
+    state, info = kf.step(state, np.array([0.0]))
+    assert state.mean == pytest.approx([0.75])
+    assert state.cov[0, 0] == pytest.approx(1.0)
+
+
+def test_kalman_filter_requires_linear_models():
+    sc = pu.scenarios.WSNRange()
+    with pytest.raises(TypeError, match="matrix"):
+        pu.KalmanFilter(sc.motion, sc.measurement)
+
+
+@pytest.mark.parametrize(
+    "motion",
+    [
+        ConstantVelocity(ndim=1, dt=0.5, q=0.3),
+        ConstantVelocity(ndim=2, dt=1.0, q=0.1, noise="continuous"),
+        ConstantVelocity(ndim=3, dt=0.1, q=2.0, layout="derivative"),
+        ConstantAcceleration(ndim=2, dt=1.0, q=0.05),
+    ],
+    ids=["cv1", "cv2-cont", "cv3-deriv", "ca2"],
+)
+@pytest.mark.parametrize("cls", [pu.ExtendedKalmanFilter, pu.UnscentedKalmanFilter, pu.CubatureKalmanFilter])
+def test_nonlinear_filters_equal_the_kf_on_linear_models(motion, cls, rng):
+    meas = LinearGaussian.position(motion.dim, motion.position_indices, 0.7)
+    runs, K = 5, 40
+    x = np.broadcast_to(np.ones(motion.dim), (runs, motion.dim))
+    zs = []
+    for k in range(K):
+        x = motion.sample(x, k, rng)
+        zs.append(meas.sample(x, k, rng))
+    zs = np.array(zs)
+    prior = pu.Gaussian(np.zeros(motion.dim), 4.0 * np.eye(motion.dim))
+    kf = pu.run(pu.KalmanFilter(motion, meas), zs, prior)
+    other = pu.run(cls(motion, meas), zs, prior)
+    np.testing.assert_allclose(other.mean, kf.mean, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(other.cov, kf.cov, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(other.info["nis"], kf.info["nis"], rtol=1e-9, atol=1e-9)
+
+
+@st.composite
+def stable_linear_models(draw):
+    """Random linear-Gaussian models with a stable (spectral radius < 1.2) transition."""
+    n = draw(st.integers(1, 4))
+    m = draw(st.integers(1, 3))
+    seed = draw(st.integers(0, 2**31 - 1))
+    r = np.random.default_rng(seed)
+    F = r.standard_normal((n, n))
+    F *= draw(st.floats(0.1, 1.2)) / max(np.max(np.abs(np.linalg.eigvals(F))), 1e-9)
+    A = r.standard_normal((n, n))
+    Q = A @ A.T * draw(st.floats(1e-4, 10.0)) + 1e-6 * np.eye(n)
+    H = r.standard_normal((m, n))
+    B = r.standard_normal((m, m))
+    R = B @ B.T * draw(st.floats(1e-3, 10.0)) + 1e-3 * np.eye(m)
+    return F, Q, H, R, seed
+
+
+@dataclass(frozen=True)
+class Linear:
+    F: np.ndarray
+    Q: np.ndarray
+
+    def transition_matrix(self, k=None, dt=None):
+        return self.F
+
+    def f(self, x, k=None, dt=None):
+        return np.einsum("ij,...j->...i", self.F, x)
+
+    def cov(self, k=None, dt=None):
+        return self.Q
+
+
+@settings(max_examples=40)
+@given(stable_linear_models())
+def test_covariances_stay_symmetric_positive_definite(model):
+    F, Q, H, R, seed = model
+    r = np.random.default_rng(seed)
+    n = F.shape[0]
+    zs = r.standard_normal((60, 3, H.shape[0])) * 5
+    prior = pu.Gaussian(np.zeros(n), np.eye(n))
+    for cls in (pu.KalmanFilter, pu.UnscentedKalmanFilter, pu.CubatureKalmanFilter):
+        track = pu.run(cls(Linear(F, Q), LinearGaussian(H, R)), zs, prior)
+        P = track.cov
+        assert np.array_equal(P, np.swapaxes(P, -1, -2))
+        assert np.all(np.linalg.eigvalsh(P) > 0), cls.__name__
+
+
+@settings(max_examples=25)
+@given(stable_linear_models())
+def test_ukf_and_ckf_equal_kf_on_random_linear_models(model):
+    F, Q, H, R, seed = model
+    r = np.random.default_rng(seed)
+    n = F.shape[0]
+    zs = r.standard_normal((20, 2, H.shape[0]))
+    prior = pu.Gaussian(r.standard_normal(n), np.eye(n))
+    motion, meas = Linear(F, Q), LinearGaussian(H, R)
+    kf = pu.run(pu.KalmanFilter(motion, meas), zs, prior)
+    for cls in (pu.ExtendedKalmanFilter, pu.UnscentedKalmanFilter, pu.CubatureKalmanFilter):
+        other = pu.run(cls(motion, meas), zs, prior)
+        scale = max(1.0, float(np.max(np.abs(kf.cov))))
+        np.testing.assert_allclose(other.mean, kf.mean, rtol=1e-9, atol=1e-9 * scale)
+        np.testing.assert_allclose(other.cov, kf.cov, rtol=1e-9, atol=1e-9 * scale)
+
+
+@pytest.mark.slow
+def test_anees_inside_chi2_bounds_on_a_matched_model():
+    scenario = LinearCV(ndim=2, steps=60, q=0.05, sigma=1.0)
+    filters = [pu.KalmanFilter(scenario.motion, scenario.measurement), pu.UnscentedKalmanFilter(scenario.motion, scenario.measurement)]
+    result = monte_carlo(scenario, filters, runs=500, seed=3)
+    for name in result.filter_names:
+        c = result.consistency(name)
+        # runs are independent, so the per-step bounds are exact: about 95 % of steps inside
+        assert c["anees_inside"] >= 0.85, (name, c)
+        assert c["anis_inside"] >= 0.85, (name, c)
+        assert c["anis_low"] <= c["anis"] <= c["anis_high"], (name, c)
+        assert 0.95 * 4 <= c["anees"] <= 1.05 * 4, (name, c)
+
+
+def test_a_mismatched_filter_fails_the_nees_test():
+    # The same check must be able to fail: a filter that believes q is 100x smaller is overconfident.
+    scenario = LinearCV(ndim=2, steps=60, q=0.5, sigma=1.0)
+    wrong = ConstantVelocity(ndim=2, q=0.005)
+    filt = pu.KalmanFilter(wrong, scenario.measurement, name="overconfident")
+    result = monte_carlo(scenario, [filt], runs=200, seed=3)
+    c = result.consistency("overconfident")
+    assert c["anees"] > c["anees_high"]
+    assert c["anees_inside"] < 0.5
+
+
+def test_constant_fading_inflates_the_prediction():
+    scenario = LinearCV(ndim=1, steps=5)
+    sim = scenario.simulate(np.random.default_rng(0), 2)
+    plain = pu.run(pu.KalmanFilter(scenario.motion, scenario.measurement), sim.measurements, sim.prior, store_predictions=True)
+    faded = pu.run(
+        pu.KalmanFilter(scenario.motion, scenario.measurement, fading=pu.Constant(1.5)),
+        sim.measurements,
+        sim.prior,
+        store_predictions=True,
+    )
+    F, Q = scenario.motion.transition_matrix(), scenario.motion.cov()
+    P0 = sim.prior.cov
+    np.testing.assert_allclose(faded.info["pred_cov"][0, 0], 1.5 * F @ P0 @ F.T + Q, rtol=1e-12)
+    np.testing.assert_allclose(plain.info["pred_cov"][0, 0], F @ P0 @ F.T + Q, rtol=1e-12)
+    assert np.all(faded.info["fading"] == 1.5)
+    with pytest.raises(ValueError, match="lam"):
+        pu.Constant(0.9)
+
+
+def test_infinite_measurement_is_refused():
+    scenario = LinearCV(ndim=1, steps=3)
+    kf = pu.KalmanFilter(scenario.motion, scenario.measurement)
+    state = kf.init(pu.Gaussian([0.0, 0.0], np.eye(2)))
+    with pytest.raises(ValueError, match="infinity"):
+        kf.step(state, np.array([np.inf]))
+
+
+def test_shared_covariance_path_equals_the_batched_path():
+    # One covariance for all runs (broadcast) must give the same bits as an explicit stack.
+    scenario = LinearCV(ndim=2, steps=30)
+    sim = scenario.simulate(np.random.default_rng(1), 6)
+    kf = pu.KalmanFilter(scenario.motion, scenario.measurement)
+    shared = pu.run(kf, sim.measurements, sim.prior)
+    stacked_prior = pu.Gaussian(sim.prior.mean, np.broadcast_to(sim.prior.cov, (6, 4, 4)).copy())
+    stacked = pu.run(kf, sim.measurements, stacked_prior)
+    np.testing.assert_array_equal(shared.mean, stacked.mean)
+    np.testing.assert_array_equal(shared.cov, stacked.cov)
+
+
+def test_ukf_rejects_impossible_parameters():
+    sc = LinearCV(ndim=1)
+    with pytest.raises(ValueError, match="alpha"):
+        pu.UnscentedKalmanFilter(sc.motion, sc.measurement, alpha=0.0)
+    ukf = pu.UnscentedKalmanFilter(sc.motion, sc.measurement, alpha=0.1, kappa=-2.5)
+    with pytest.raises(ValueError, match="n \\+ lambda"):
+        pu.run(ukf, np.zeros((2, 1, 1)), pu.Gaussian([0.0, 0.0], np.eye(2)))
+
+
+def test_filter_rejects_objects_that_are_not_models():
+    with pytest.raises(TypeError, match="f\\(\\)"):
+        pu.ExtendedKalmanFilter(object(), LinearGaussian([[1.0]], [[1.0]]))
