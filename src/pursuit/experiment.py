@@ -47,10 +47,22 @@ class ConfigError(ValueError):
 
 @dataclass
 class Table:
-    """A result table: printed on the terminal and written as CSV.
+    """A result table: printed on the terminal, written as CSV, shown in reports.
 
-    ``source`` columns (``"paper"`` / ``"measured"``) let a reader tell the
-    papers' numbers from ours.
+    Attributes
+    ----------
+    name
+        File stem for the CSV (``summary`` -> ``summary.csv``).
+    title
+        One line shown above the table.
+    columns, rows
+        Header and rows (numbers stay numbers; formatting is the writer's job).
+    notes
+        Free text shown under the table (caveats, definitions).
+    kind
+        ``"result"`` for our measurements, ``"paper"`` for a table that
+        puts a paper's numbers beside ours (its columns then say which is
+        which, e.g. ``paper`` and ``measured``).
     """
 
     name: str
@@ -58,6 +70,7 @@ class Table:
     columns: list[str]
     rows: list[list[Any]]
     notes: str = ""
+    kind: str = "result"
 
 
 @dataclass

@@ -114,6 +114,7 @@ def paper_table(result: MonteCarloResult, paper: list[dict[str, Any]], name: str
         "Paper's values (source: paper) beside ours (source: measured)",
         ["filter", "metric", "paper", "measured", "measured/paper", "note"],
         rows,
+        kind="paper",
     )
 
 
