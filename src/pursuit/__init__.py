@@ -1,5 +1,6 @@
 """pursuit: tracking and positioning filters with a fair, fast Monte Carlo engine."""
 
+from .engine.montecarlo import monte_carlo
 from .engine.run import run
 from .filters import (
     Constant,
@@ -10,6 +11,7 @@ from .filters import (
     rts_smooth,
 )
 from .gaussian import Gaussian
+from .results import FilterResult, MonteCarloResult
 from .rng import RunStreams
 from .track import Track
 
@@ -20,6 +22,9 @@ __all__ = [
     "RunStreams",
     "Track",
     "run",
+    "monte_carlo",
+    "MonteCarloResult",
+    "FilterResult",
     "KalmanFilter",
     "ExtendedKalmanFilter",
     "UnscentedKalmanFilter",

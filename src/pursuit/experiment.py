@@ -218,12 +218,17 @@ def locate(text: str, field_path: str) -> int | None:
     the key inside it; a key nested in an inline table falls back to the line
     of its outermost key.  Returns None when nothing matches.
     """
-    parts = [(n, None if i is None else int(i)) for n, i in _FIELD_PART.findall(field_path)]
+    parts = [(n, int(i) if i else None) for n, i in _FIELD_PART.findall(field_path)]
     if not parts:
         return None
-    for cut in range(len(parts), 0, -1):
+    lines = text.splitlines()
+    for cut in range(len(parts), 0, -1):  # the key inside the deepest table that has it
         table, rest = parts[:cut], parts[cut:]
-        line = _find(text.splitlines(), table, rest[0][0] if rest else None)
+        line = _find(lines, table, rest[0][0] if rest else None)
+        if line is not None:
+            return line
+    for cut in range(len(parts) - 1, 0, -1):  # else the header of the table it belongs in
+        line = _find(lines, parts[:cut], None)
         if line is not None:
             return line
     return None

@@ -1,0 +1,109 @@
+"""Measurement models: values, analytic Jacobians against numerical ones, likelihoods, wrapping."""
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from scipy import stats
+
+from pursuit._linalg import numerical_jacobian
+from pursuit.models import LinearGaussian, RangeBearing, RangeSensors, TimeOfArrival, gaussian_loglik, wrap_angle
+
+ANCHORS = np.array([[0.0, 0.0], [50.0, 0.0], [0.0, 50.0]])
+
+
+def test_range_values():
+    m = RangeSensors(ANCHORS, 0.5)
+    x = np.array([30.0, 1.0, 40.0, -1.0])
+    np.testing.assert_allclose(m.h(x), [50.0, np.hypot(20, 40), np.hypot(30, 10)])
+    np.testing.assert_allclose(m.cov(), 0.25 * np.eye(3))
+
+
+def test_toa_is_range_over_c():
+    r = RangeSensors(ANCHORS, 1.0)
+    t = TimeOfArrival(ANCHORS, 1e-5, c=1480.0)
+    x = np.array([[12.0, 0.0, 7.0, 0.0], [3.0, 1.0, 44.0, 2.0]])
+    np.testing.assert_allclose(t.h(x), r.h(x) / 1480.0)
+    np.testing.assert_allclose(t.jacobian(x), r.jacobian(x) / 1480.0)
+
+
+finite = st.floats(-200, 200, allow_nan=False)
+
+
+@given(st.tuples(finite, finite, finite, finite))
+def test_analytic_jacobians_match_numerical_ones(state):
+    x = np.array(state)
+    for model in (RangeSensors(ANCHORS, 1.0), TimeOfArrival(ANCHORS, 1e-4), RangeBearing([5.0, -3.0], 1.0, 0.01)):
+        d = x[[0, 2]] - (ANCHORS if not isinstance(model, RangeBearing) else model.sensor)
+        if np.min(np.abs(d)) < 1.0 or np.min(np.hypot(*np.atleast_2d(d).T)) < 1.0:
+            continue  # too close to a sensor for finite differences
+        J = model.jacobian(x)
+        Jn = numerical_jacobian(lambda xs: model.h(xs), x)
+        if isinstance(model, RangeBearing):
+            Jn = numerical_jacobian(lambda xs: np.unwrap(model.h(xs), axis=-2), x)
+        np.testing.assert_allclose(J, Jn, rtol=1e-5, atol=1e-8 * np.max(np.abs(J)))
+
+
+def test_range_jacobian_at_an_anchor_is_zero_not_nan():
+    m = RangeSensors(ANCHORS, 1.0)
+    J = m.jacobian(np.array([0.0, 0.0, 0.0, 0.0]))
+    assert np.all(np.isfinite(J)) and np.all(J[0] == 0)
+
+
+def test_bearing_residual_wraps():
+    m = RangeBearing([0.0, 0.0], 1.0, 0.1)
+    a = np.array([10.0, np.pi - 0.01])
+    b = np.array([9.0, -np.pi + 0.01])
+    np.testing.assert_allclose(m.residual(a, b), [1.0, -0.02], atol=1e-12)
+    assert wrap_angle(np.array([3 * np.pi]))[0] == pytest.approx(-np.pi)
+
+
+def test_loglik_matches_scipy(rng):
+    R = np.array([[2.0, 0.3], [0.3, 1.0]])
+    H = rng.standard_normal((2, 4))
+    m = LinearGaussian(H, R)
+    x = rng.standard_normal((5, 4))
+    z = rng.standard_normal(2)
+    expected = [stats.multivariate_normal(H @ xi, R).logpdf(z) for xi in x]
+    np.testing.assert_allclose(m.loglik(z, x), expected, rtol=1e-12)
+
+
+def test_loglik_skips_missing_components_with_diagonal_noise():
+    res = np.array([1.0, np.nan, -2.0])
+    R = np.diag([1.0, 4.0, 2.0])
+    expected = stats.norm(0, 1).logpdf(1.0) + stats.norm(0, np.sqrt(2.0)).logpdf(-2.0)
+    assert gaussian_loglik(res, R) == pytest.approx(expected)
+    with pytest.raises(ValueError, match="diagonal"):
+        gaussian_loglik(res, np.array([[1, 0.1, 0], [0.1, 4, 0], [0, 0, 2.0]]))
+
+
+def test_samples_have_the_model_noise(rng):
+    m = RangeSensors(ANCHORS, [0.5, 1.0, 2.0])
+    x = np.tile([10.0, 0.0, 20.0, 0.0], (100_000, 1))
+    d = m.sample(x, 1, rng) - m.h(x)
+    np.testing.assert_allclose(d.std(axis=0), [0.5, 1.0, 2.0], rtol=0.02)
+
+
+def test_position_helper():
+    m = LinearGaussian.position(6, (0, 2, 4), [1.0, 2.0, 3.0])
+    assert m.matrix().shape == (3, 6)
+    np.testing.assert_array_equal(m.h(np.arange(6.0)), [0.0, 2.0, 4.0])
+    np.testing.assert_allclose(np.diag(m.cov()), [1.0, 4.0, 9.0])
+
+
+@pytest.mark.parametrize(
+    "build,field",
+    [
+        (lambda: RangeSensors(ANCHORS, -1.0), "sigma"),
+        (lambda: RangeSensors(ANCHORS, [1.0, 2.0]), "sigma"),
+        (lambda: RangeSensors(np.zeros((2, 3)), 1.0), "anchors"),
+        (lambda: TimeOfArrival(ANCHORS, 1e-5, c=0.0), "c"),
+        (lambda: LinearGaussian([[1.0, 0.0]], [[-1.0]]), "R"),
+        (lambda: LinearGaussian([[1.0, 0.0]], [[1.0, 0.5], [0.5, 1.0]]), "R"),
+        (lambda: LinearGaussian([[1.0, np.nan]], [[1.0]]), "H"),
+        (lambda: RangeBearing([0.0], 1.0, 0.1), "sensor"),
+    ],
+)
+def test_bad_parameters_name_the_field(build, field):
+    with pytest.raises(ValueError, match=f"^{field}"):
+        build()

@@ -1,0 +1,101 @@
+"""The command line, end to end (in process and as a real subprocess)."""
+
+import json
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from pursuit.cli import main
+
+from .test_config import GOOD
+
+
+@pytest.fixture
+def config(tmp_path):
+    p = tmp_path / "exp.toml"
+    p.write_text(GOOD)
+    return p
+
+
+def test_run_writes_table_csv_json_and_figures(tmp_path, config, capsys):
+    out = tmp_path / "out"
+    assert main(["run", str(config), "--out", str(out), "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    assert "EKF" in printed and "UKF" in printed and "rmse_position" in printed
+    assert (out / "summary.csv").read_text().startswith("filter,")
+    side = json.loads((out / "run.json").read_text())
+    assert side["seed"] == 1 and side["runs"] == 3
+    assert side["config"]["scenario"]["type"] == "wsn-range"
+    assert {"numpy", "scipy", "matplotlib", "pursuit", "python"} <= set(side["versions"])
+    for fig in ("rmse_position", "rmse_velocity", "trajectory"):
+        assert (out / "figures" / f"{fig}.png").stat().st_size > 1000
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".out")]  # no temporary left behind
+
+
+def test_overrides_and_pdf(tmp_path, config):
+    out = tmp_path / "o"
+    assert main(["run", str(config), "--out", str(out), "--runs", "2", "--seed", "9", "--pdf", "--no-progress"]) == 0
+    side = json.loads((out / "run.json").read_text())
+    assert side["runs"] == 2 and side["seed"] == 9
+    assert (out / "figures" / "trajectory.pdf").exists()
+
+
+@pytest.mark.parametrize(
+    "args,msg",
+    [
+        (["--runs", "0"], "--runs: must be at least 1"),
+        (["--seed", "-1"], "--seed: must be a non-negative integer"),
+    ],
+)
+def test_bad_overrides_exit_2_and_write_nothing(tmp_path, config, capsys, args, msg):
+    out = tmp_path / "out"
+    assert main(["run", str(config), "--out", str(out), *args]) == 2
+    assert msg in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_bad_config_exits_2_with_one_line_and_writes_nothing(tmp_path, capsys):
+    p = tmp_path / "bad.toml"
+    p.write_text(GOOD.replace("sigma = 1.0", "sigma = -1.0"))
+    out = tmp_path / "out"
+    assert main(["run", str(p), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert err[0] == f"pursuit: error: {p}:8: scenario.sigma: must be positive, got -1.0"
+    assert not out.exists()
+    assert list(tmp_path.iterdir()) == [p]
+
+
+def test_reproduce_by_name_and_unknown_name(tmp_path, capsys):
+    assert main(["reproduce", "wsn-gaussian", "--runs", "2", "--out", str(tmp_path), "--no-progress"]) == 0
+    assert (tmp_path / "wsn-gaussian" / "summary.csv").exists()
+    assert main(["reproduce", "no-such-thing", "--out", str(tmp_path)]) == 2
+    assert "no experiment named" in capsys.readouterr().err
+
+
+def test_list(capsys):
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    for word in ("ekf", "ukf", "ckf", "kf", "wsn-range", "cv-position", "wsn-gaussian", "constant", "range-bearing"):
+        assert word in out
+    assert main(["list", "filters", "-v"]) == 0
+    assert "alpha (float) = 1.0" in capsys.readouterr().out
+
+
+def test_console_script_runs_as_a_subprocess(tmp_path, config):
+    proc = subprocess.run(
+        [sys.executable, "-m", "pursuit.cli", "run", str(config), "--out", str(tmp_path / "o"), "--runs", "2"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == ""  # no progress bar when stderr is not a terminal
+    bad = tmp_path / "bad.toml"
+    bad.write_text(textwrap.dedent(GOOD).replace("[[filters]]", "[[filterz]]", 1))
+    proc = subprocess.run([sys.executable, "-m", "pursuit.cli", "run", str(bad)], capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert proc.returncode == 2
+    assert "filterz: unknown section" in proc.stderr
+    assert "Traceback" not in proc.stderr

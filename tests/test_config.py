@@ -1,0 +1,109 @@
+"""Experiment files: a good one loads; every kind of bad one gets one clear line."""
+
+import textwrap
+
+import pytest
+
+from pursuit.experiment import ConfigError, find_experiment, list_experiments, load_experiment, locate
+
+GOOD = """\
+[experiment]
+title = "test"
+runs = 3
+seed = 1
+
+[scenario]
+type = "wsn-range"
+sigma = 1.0
+steps = 5
+P0 = [4.0, 0.25, 4.0, 0.25]
+
+[[filters]]
+type = "ekf"
+
+[[filters]]
+type = "ukf"
+alpha = 0.5
+"""
+
+
+def write(tmp_path, text, name="exp.toml"):
+    p = tmp_path / name
+    p.write_text(textwrap.dedent(text))
+    return p
+
+
+def test_good_file_loads(tmp_path):
+    exp = load_experiment(write(tmp_path, GOOD))
+    assert exp.name == "exp" and exp.runs == 3 and exp.seed == 1 and exp.kind == "montecarlo"
+    assert [f.name for f in exp.plan.filters] == ["EKF", "UKF"]
+    assert exp.plan.filters[1].alpha == 0.5
+
+
+def test_bundled_experiments_load():
+    names = list_experiments()
+    assert "wsn-gaussian" in names
+    for name in names:
+        load_experiment(find_experiment(name))
+
+
+@pytest.mark.parametrize(
+    "old,new,field,line",
+    [
+        ('sigma = 1.0', 'sigma = 1.0\ncolour = "red"', "scenario.colour: unknown key", 9),
+        ('sigma = 1.0', 'sigma = "big"', "scenario.sigma: expected a number", 8),
+        ('sigma = 1.0', 'sigma = -1.0', "scenario.sigma: must be positive", 8),
+        ('P0 = [4.0, 0.25, 4.0, 0.25]', 'P0 = [[1.0, 2.0, 0.0, 0.0], [2.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]', "scenario.P0: covariance is not positive definite", 10),
+        ('P0 = [4.0, 0.25, 4.0, 0.25]', 'P0 = [4.0, 0.25, 4.0]', "scenario.P0: expected a 4x4 matrix", 10),
+        ("runs = 3", "runs = 0", "experiment.runs: must be at least 1", 3),
+        ("runs = 3", "runs = 2.5", "experiment.runs: expected an integer", 3),
+        ("seed = 1", "seed = -4", "experiment.seed: must be a non-negative integer", 4),
+        ('type = "ukf"', 'type = "xkf"', "filters[1].type: unknown filter 'xkf'", 16),
+        ("alpha = 0.5", "alpha = -0.5", "filters[1].alpha: must lie in", 17),
+        ("alpha = 0.5", "fading = 0.5", "filters[1].fading.lam: must lie in", 17),
+        ("alpha = 0.5", 'name = "EKF"', "filters: names must be unique", None),
+        ('type = "wsn-range"', 'type = "moon"', "scenario.type: unknown scenario 'moon'", 7),
+        ("[experiment]", "[experimant]\n[experiment]", "experimant: unknown section", None),
+    ],
+)
+def test_bad_values_name_file_line_and_field(tmp_path, old, new, field, line):
+    assert old in GOOD
+    p = write(tmp_path, GOOD.replace(old, new, 1))
+    with pytest.raises(ConfigError) as info:
+        load_experiment(p)
+    msg = str(info.value)
+    assert field in msg
+    assert msg.startswith(str(p))
+    if line is not None:
+        assert info.value.line == line, msg
+        assert msg.startswith(f"{p}:{line}: ")
+    assert "\n" not in msg
+
+
+def test_paper_values_are_checked(tmp_path):
+    ok = GOOD + '\n[[paper]]\nfilter = "EKF"\nmetric = "rmse_position"\nvalue = 1.5\n'
+    load_experiment(write(tmp_path, ok))
+    bad = ok.replace('filter = "EKF"', 'filter = "PF"')
+    with pytest.raises(ConfigError, match=r"paper\[0\]\.filter: no filter named 'PF'"):
+        load_experiment(write(tmp_path, bad, "bad.toml"))
+
+
+def test_missing_sections_and_files(tmp_path):
+    with pytest.raises(ConfigError, match="filters: required section"):
+        load_experiment(write(tmp_path, GOOD.split("[[filters]]")[0]))
+    with pytest.raises(ConfigError, match="file not found"):
+        load_experiment(tmp_path / "nope.toml")
+    with pytest.raises(ConfigError, match="invalid TOML") as info:
+        load_experiment(write(tmp_path, GOOD + "\nthis is not toml\n", "broken.toml"))
+    assert info.value.line == 19
+    with pytest.raises(ConfigError, match="no experiment named"):
+        find_experiment("no-such-experiment")
+
+
+def test_locate():
+    text = GOOD
+    assert locate(text, "scenario.sigma") == 8
+    assert locate(text, "filters[1].alpha") == 17
+    assert locate(text, "filters[1]") == 15
+    assert locate(text, "filters[1].fading.lam") == 15
+    assert locate(text, "nothing.here") is None
