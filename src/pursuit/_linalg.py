@@ -23,6 +23,7 @@ import numpy as np
 __all__ = [
     "symmetrize",
     "mv",
+    "apply_matrix",
     "quad",
     "inv_spd",
     "logdet_spd",
@@ -44,6 +45,19 @@ def mv(A: np.ndarray, x: np.ndarray) -> np.ndarray:
     ``A`` is ``(*b, p, n)`` or ``(p, n)``, ``x`` is ``(*b, n)``.
     """
     return np.einsum("...ij,...j->...i", A, x)
+
+
+def apply_matrix(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``A x`` for one matrix ``A`` ``(p, n)`` and a batch of vectors ``x`` ``(*b, n)``.
+
+    With two or more batch axes (sigma points, particles) ``np.matmul`` runs
+    one small GEMM per inner matrix, which is fast and batch-invariant; a
+    plain ``(M, n)`` batch goes through ``einsum``, because one big GEMM over
+    all runs would not be batch-invariant.
+    """
+    if x.ndim >= 3:
+        return np.matmul(x, A.T)
+    return np.einsum("ij,...j->...i", A, x)
 
 
 def quad(x: np.ndarray, A: np.ndarray) -> np.ndarray:

@@ -405,20 +405,25 @@ class KalmanFilter(ExtendedKalmanFilter):
 # --------------------------------------------------------------------------
 @dataclass(frozen=True)
 class _SigmaPointFilter(_GaussianFilter):
-    def _unit_points(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Unit sigma points ``(p, n)`` and mean / covariance weights ``(p,)``."""
+    def _weights(self, n: int) -> tuple[float, np.ndarray, np.ndarray]:
+        """Point scale c and mean / covariance weights; points are x and x ± c·(columns of chol P)."""
         raise NotImplementedError
 
     def _points(self, x, P):
-        xi, wm, wc = self._unit_points(x.shape[-1])
+        scale, wm, wc = self._weights(x.shape[-1])
         L, repaired = cholesky_psd(P)
-        chi = x[..., None, :] + np.einsum("...ij,pj->...pi", L, xi)
-        return chi, wm, wc, repaired
+        cols = scale * np.swapaxes(L, -1, -2)  # row j = scale * column j of L
+        cols = np.broadcast_to(cols, (*x.shape[:-1], *cols.shape[-2:]))
+        centre = x[..., None, :]
+        parts = [centre + cols, centre - cols]
+        if wm.shape[0] % 2:  # an odd count carries the centre point first
+            parts.insert(0, centre)
+        return np.concatenate(parts, axis=-2), wm, wc, repaired
 
     def _predict(self, x, P, k, dt):
         chi, wm, wc, repaired = self._points(x, P)
         Y = np.asarray(_call(self.motion.f, chi, k, dt=dt), dtype=float)
-        mean = np.einsum("p,...pi->...i", wm, Y)
+        mean = np.matmul(wm, Y)
         dY = Y - mean[..., None, :]
         dX = chi - x[..., None, :]
         propagated = symmetrize(_t(dY * wc[:, None]) @ dY)
@@ -429,11 +434,10 @@ class _SigmaPointFilter(_GaussianFilter):
     def _measure(self, x_pred, P_pred, k):
         chi, wm, wc, repaired = self._points(x_pred, P_pred)
         Z = np.asarray(self.measurement.h(chi, k), dtype=float)
-        # Average residuals about the central point so that angles are
+        # Average residuals about the first point so that angles are
         # averaged on the circle, not across the ±π cut.
         Z0 = Z[..., :1, :]
-        dZ0 = _residual(self.measurement, Z, Z0)
-        zp = Z0[..., 0, :] + np.einsum("p,...pi->...i", wm, dZ0)
+        zp = Z0[..., 0, :] + np.matmul(wm, _residual(self.measurement, Z, Z0))
         dZ = _residual(self.measurement, Z, zp[..., None, :])
         dX = chi - x_pred[..., None, :]
         Pzz = _t(dZ * wc[:, None]) @ dZ
@@ -475,18 +479,16 @@ class UnscentedKalmanFilter(_SigmaPointFilter):
     def _default_name(self) -> str:
         return "UKF"
 
-    def _unit_points(self, n):
+    def _weights(self, n):
         lam = self.alpha**2 * (n + self.kappa) - n
         c = n + lam
         if c <= 0:
             raise ValueError(f"UKF: alpha={self.alpha}, kappa={self.kappa} give n + lambda = {c:.3g} <= 0 for n = {n}")
-        scale = np.sqrt(c)
-        xi = np.vstack([np.zeros(n), scale * np.eye(n), -scale * np.eye(n)])
         wm = np.full(2 * n + 1, 0.5 / c)
         wc = wm.copy()
         wm[0] = lam / c
         wc[0] = lam / c + 1.0 - self.alpha**2 + self.beta
-        return xi, wm, wc
+        return np.sqrt(c), wm, wc
 
 
 @dataclass(frozen=True)
@@ -499,8 +501,6 @@ class CubatureKalmanFilter(_SigmaPointFilter):
     def _default_name(self) -> str:
         return "CKF"
 
-    def _unit_points(self, n):
-        scale = np.sqrt(n)
-        xi = np.vstack([scale * np.eye(n), -scale * np.eye(n)])
+    def _weights(self, n):
         w = np.full(2 * n, 0.5 / n)
-        return xi, w, w
+        return np.sqrt(n), w, w

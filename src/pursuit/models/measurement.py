@@ -23,6 +23,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .._linalg import apply_matrix
 from .._validation import as_covariance, as_matrix, as_vector, positive
 from ..rng import RNGLike, as_rng
 
@@ -85,7 +86,7 @@ class _GaussianNoise:
         """Noisy measurement of a batch of states (``rng`` may be RunStreams)."""
         zp = self.h(x, k)
         xi = as_rng(rng).standard_normal(zp.shape)
-        return zp + np.einsum("ij,...j->...i", self._chol_R, xi)
+        return zp + apply_matrix(self._chol_R, xi)
 
     def _set_noise(self, R: np.ndarray) -> None:
         _freeze(self, "R", R)
@@ -139,7 +140,7 @@ class LinearGaussian(_GaussianNoise):
 
     def h(self, x: np.ndarray, k: int | None = None) -> np.ndarray:
         """``H x`` for a batch of states."""
-        return np.einsum("ij,...j->...i", self.H, x)
+        return apply_matrix(self.H, x)
 
     def jacobian(self, x: np.ndarray | None = None, k: int | None = None) -> np.ndarray:
         """The shared matrix H."""

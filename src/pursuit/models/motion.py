@@ -24,7 +24,7 @@ from typing import Literal
 
 import numpy as np
 
-from .._linalg import psd_factor
+from .._linalg import apply_matrix, psd_factor
 from .._validation import positive, positive_int
 from ..rng import RNGLike, as_rng
 
@@ -145,7 +145,7 @@ class _Kinematic:
 
     def f(self, x: np.ndarray, k: int | None = None, dt: float | None = None) -> np.ndarray:
         """Noise-free transition ``F x`` for a batch of states."""
-        return np.einsum("ij,...j->...i", self._matrices(dt)[0], x)
+        return apply_matrix(self._matrices(dt)[0], x)
 
     def jacobian(self, x: np.ndarray | None = None, k: int | None = None, dt: float | None = None) -> np.ndarray:
         """Jacobian of ``f``: the shared matrix F."""
@@ -163,7 +163,7 @@ class _Kinematic:
         """Draw x_k ~ N(F x, Q) for a batch of states (``rng`` may be RunStreams)."""
         F, _, G = self._matrices(dt)
         xi = as_rng(rng).standard_normal((*x.shape[:-1], G.shape[1]))
-        return np.einsum("ij,...j->...i", F, x) + np.einsum("ij,...j->...i", G, xi)
+        return apply_matrix(F, x) + apply_matrix(G, xi)
 
 
 @dataclass(frozen=True)
