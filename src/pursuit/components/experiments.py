@@ -15,7 +15,15 @@ from ..registry import Param, register
 from ..report.figures import rmse_over_time, trajectory
 from ..results import MonteCarloResult
 
-__all__ = ["MonteCarloPlan", "build_scenario", "build_filters", "summary_table", "paper_table", "PAPER_PARAMS"]
+__all__ = [
+    "MonteCarloPlan",
+    "build_scenario",
+    "build_filters",
+    "summary_table",
+    "consistency_table",
+    "paper_table",
+    "PAPER_PARAMS",
+]
 
 FIGURE_PARAMS = (
     Param("trajectory_run", "int", 0, "which run's trajectory to draw"),
@@ -90,15 +98,32 @@ def resolve_paper(sections: dict[str, Any], filter_names: list[str]) -> list[dic
     return out
 
 
+CONSISTENCY_COLUMNS = ("anees", "anees_low", "anees_high", "anees_inside", "anis", "anis_low", "anis_high", "anis_inside")
+
+
 def summary_table(result: MonteCarloResult, name: str = "summary", title: str = "") -> Table:
-    """The per-filter summary as a :class:`Table`."""
+    """Errors and run time per filter as a :class:`Table` (consistency is in :func:`consistency_table`)."""
     rows = result.summary()
     cols: list[str] = []
     for r in rows:
         for key in r:
-            if key not in cols:
+            if key not in cols and key not in CONSISTENCY_COLUMNS:
                 cols.append(key)
     return Table(name, title or f"{result.scenario}: {result.runs} runs, seed {result.seed}", cols, [[r.get(c) for c in cols] for r in rows])
+
+
+def consistency_table(result: MonteCarloResult, name: str = "consistency") -> Table | None:
+    """ANEES and ANIS with their chi-square 95 % bounds per filter (None if no filter reports them)."""
+    rows = result.summary()
+    cols = [c for c in CONSISTENCY_COLUMNS if any(c in r for r in rows)]
+    if not cols:
+        return None
+    return Table(
+        name,
+        "Consistency: average NEES / NIS with chi-square 95 % bounds; *_inside = share of steps inside the per-step bounds",
+        ["filter", *cols],
+        [[r["filter"], *[r.get(c) for c in cols]] for r in rows],
+    )
 
 
 def paper_table(result: MonteCarloResult, paper: list[dict[str, Any]], name: str = "paper_vs_measured") -> Table:
@@ -151,6 +176,9 @@ class MonteCarloPlan:
             self.scenario, self.filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections
         )
         tables = [summary_table(result)]
+        consistency = consistency_table(result)
+        if consistency is not None:
+            tables.append(consistency)
         if self.paper:
             tables.append(paper_table(result, self.paper))
         figs = standard_figures(result, self.scenario, self.figure_opts)
