@@ -56,6 +56,7 @@ __all__ = [
     "CubatureKalmanFilter",
     "motion_jacobian",
     "measurement_jacobian",
+    "linear_update",
 ]
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
@@ -326,6 +327,40 @@ def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k):
         "loglik": np.broadcast_to(loglik, batch),
     }
     return mean, cov, info
+
+
+def linear_update(
+    x_pred: np.ndarray, P_pred: np.ndarray, z: np.ndarray, H: np.ndarray, measurement: Any, k: int
+) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """The shared Kalman update for a linear measurement ``z = H x + v``, for filters built elsewhere.
+
+    Filters that form their own prediction (the CS-model filters, the IMM's
+    model-matched filters) call this so that missing components, the Joseph
+    form and the info keys ``innovation``, ``S``, ``nis``, ``dof`` and
+    ``loglik`` mean exactly what they mean in every Gaussian filter.
+
+    Parameters
+    ----------
+    x_pred, P_pred
+        Predicted mean ``(*b, n)`` and covariance ``(*b, n, n)``.
+    z
+        Measurement ``(*b, m)``; NaN components are missing.
+    H
+        ``(m, n)`` or ``(*b, m, n)``.
+    measurement
+        Gives ``cov(k)`` (R, ``(m, m)`` or broadcasting against ``(*b, m, m)``)
+        and optionally ``residual(a, b)``.
+    k
+        Step index passed to ``measurement.cov``.
+
+    Returns
+    -------
+    mean, cov, info
+    """
+    H = np.asarray(H, dtype=float)
+    PHt = P_pred @ _t(H)
+    meas = _Measured(mv(H, x_pred), H @ PHt, PHt, H)
+    return _update(x_pred, P_pred, z, ~np.isnan(z), meas, measurement, k)
 
 
 # --------------------------------------------------------------------------

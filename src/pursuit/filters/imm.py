@@ -1,0 +1,337 @@
+"""Interacting multiple model (IMM) filter over any set of model-matched filters.
+
+The IMM runs r filters (modes) in parallel and mixes their estimates through
+a Markov chain of mode switches with transition matrix Π (``Π[i, j]`` =
+P{mode j at k | mode i at k − 1}).  One cycle [LIT]:
+
+* predicted mode probabilities ``c̄_j = Σ_i Π_ij μ_i`` and mixing weights
+  ``μ_{i|j} = Π_ij μ_i / c̄_j``;
+* mixed initial condition per mode, ``x̂_0j = Σ_i μ_{i|j} x̂_i``,
+  ``P_0j = Σ_i μ_{i|j} [P_i + (x̂_i − x̂_0j)(·)ᵀ]``;
+* each mode's own ``step`` from its mixed state, giving its innovation
+  log-likelihood ``log Λ_j``;
+* ``μ_j ∝ c̄_j Λ_j`` and the output ``x̂ = Σ_j μ_j x̂_j``,
+  ``P = Σ_j μ_j [P_j + (x̂_j − x̂)(·)ᵀ]``.
+
+Modes may have different state vectors: a :class:`StateMap` places each
+mode's state inside the IMM's common state (usually the largest), and the
+components a mode lacks are filled with a fixed mean and variance (zero
+acceleration for a constant-velocity mode inside a constant-acceleration
+state, the textbook augmentation).
+
+Info keys: the standard ones describe the mixture's predicted measurement,
+moment-matched: with ν_j the mode innovations and c̄_j the predicted mode
+probabilities, ``innovation = Σ c̄_j ν_j`` (= z − Σ c̄_j ẑ_j) and
+``S = Σ c̄_j [S_j + (ν_j − ν)(ν_j − ν)ᵀ]``; ``nis`` and ``loglik`` are
+νᵀS⁻¹ν and log N(ν; 0, S) of that Gaussian, as in every filter.  Extra:
+``mode_probs`` (*b, r) (μ after the update), ``mode_loglik`` (*b, r) and
+``loglik_mixture`` = log Σ_j c̄_j Λ_j, the exact IMM likelihood of the step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any, Sequence
+
+import numpy as np
+
+from .._linalg import inv_spd, logdet_spd, mv, quad, symmetrize
+from ..gaussian import Gaussian
+from ..rng import RNGLike
+
+__all__ = ["StateMap", "IMMState", "InteractingMultipleModel", "kinematic_map"]
+
+_LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+@dataclass(frozen=True)
+class StateMap:
+    """Where a mode's state sits inside the IMM's common state.
+
+    Parameters
+    ----------
+    indices
+        For each component of the mode's state, its index in the common
+        state.
+    dim
+        Dimension of the common state.
+    fill_mean, fill_var
+        Mean and variance given to the common components the mode does not
+        have (scalars or ``(dim − len(indices),)`` vectors, in increasing
+        index order), uncorrelated with the rest.
+    """
+
+    indices: tuple[int, ...]
+    dim: int
+    fill_mean: Any = 0.0
+    fill_var: Any = 0.0
+
+    def __post_init__(self) -> None:
+        idx = tuple(int(i) for i in self.indices)
+        if len(set(idx)) != len(idx) or any(i < 0 or i >= self.dim for i in idx):
+            raise ValueError(f"indices: must be distinct indices in [0, {self.dim}), got {idx}")
+        object.__setattr__(self, "indices", idx)
+        missing = np.array([i for i in range(self.dim) if i not in idx], dtype=int)
+        fm = np.broadcast_to(np.asarray(self.fill_mean, dtype=float), missing.shape).copy()
+        fv = np.broadcast_to(np.asarray(self.fill_var, dtype=float), missing.shape).copy()
+        if not (np.all(np.isfinite(fm)) and np.all(np.isfinite(fv))) or np.any(fv < 0):
+            raise ValueError("fill_mean, fill_var: must be finite, variances non-negative")
+        object.__setattr__(self, "_missing", missing)
+        object.__setattr__(self, "_fill_mean", fm)
+        object.__setattr__(self, "_fill_var", fv)
+
+    def to_mode(self, mean: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Common-state Gaussian to the mode's components (a marginal)."""
+        i = np.array(self.indices)
+        return np.ascontiguousarray(mean[..., i]), np.ascontiguousarray(cov[..., i[:, None], i[None, :]])
+
+    def to_common(self, mean: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The mode's Gaussian in the common state, missing components filled."""
+        i = np.array(self.indices)
+        batch = mean.shape[:-1]
+        out_m = np.empty((*batch, self.dim))
+        out_m[..., i] = mean
+        out_m[..., self._missing] = self._fill_mean
+        out_c = np.zeros((*np.broadcast_shapes(batch, cov.shape[:-2]), self.dim, self.dim))
+        out_c[..., i[:, None], i[None, :]] = cov
+        out_c[..., self._missing, self._missing] = self._fill_var
+        return out_m, out_c
+
+
+def kinematic_map(mode_motion: Any, common_motion: Any, fill_var: float = 0.0) -> StateMap:
+    """A :class:`StateMap` matching position, velocity, acceleration and jerk indices of two models.
+
+    Both models must expose ``position_indices`` and ``velocity_indices``
+    (and ``acceleration_indices`` / ``jerk_indices`` where they have them),
+    e.g. a constant-velocity mode inside a CA or Singer common state.
+    """
+    pairs = []
+    for attr in ("position_indices", "velocity_indices", "acceleration_indices", "jerk_indices"):
+        a = getattr(mode_motion, attr, None)
+        b = getattr(common_motion, attr, None)
+        if a is None:
+            continue
+        if b is None or len(a) != len(b):
+            raise ValueError(f"kinematic_map: the common model has no matching {attr}")
+        pairs.extend(zip(a, b))
+    n_mode = int(getattr(mode_motion, "dim"))
+    if sorted(p for p, _ in pairs) != list(range(n_mode)):
+        raise ValueError("kinematic_map: the mode's state is not covered by position/velocity/acceleration indices")
+    order = [c for _, c in sorted(pairs)]
+    return StateMap(tuple(order), int(getattr(common_motion, "dim")), 0.0, fill_var)
+
+
+@dataclass(frozen=True)
+class IMMState:
+    """State of the IMM filter.
+
+    Attributes
+    ----------
+    mean, cov
+        Combined estimate in the common state, ``(*b, n)`` and ``(*b, n, n)``.
+    k
+        Last step processed.
+    modes
+        Each mode filter's own state.
+    probs
+        Mode probabilities μ, ``(*b, r)``.
+    """
+
+    mean: np.ndarray
+    cov: np.ndarray
+    k: int
+    modes: tuple[Any, ...]
+    probs: np.ndarray
+
+    @property
+    def batch(self) -> tuple[int, ...]:
+        """Batch shape."""
+        return self.mean.shape[:-1]
+
+
+def _check_transition(P: np.ndarray, r: int) -> np.ndarray:
+    P = np.array(P, dtype=float)
+    if P.shape != (r, r):
+        raise ValueError(f"transition: expected a {r}x{r} matrix, got shape {P.shape}")
+    if not np.all(np.isfinite(P)) or np.any(P < 0):
+        raise ValueError("transition: entries must be finite and non-negative")
+    if not np.allclose(P.sum(axis=1), 1.0, rtol=0, atol=1e-9):
+        raise ValueError(f"transition: rows must sum to 1, got {P.sum(axis=1)}")
+    P = P / P.sum(axis=1, keepdims=True)
+    P.setflags(write=False)
+    return P
+
+
+@dataclass(frozen=True)
+class InteractingMultipleModel:
+    """IMM filter.
+
+    Parameters
+    ----------
+    filters
+        The model-matched filters (any pursuit filters whose states have
+        ``mean`` and ``cov`` and whose info has ``loglik``: KF, EKF, UKF,
+        CKF, the CS-family filters, ...).
+    transition
+        ``(r, r)`` Markov transition matrix, rows summing to 1; or a number
+        p: ``Π_ii = p``, off-diagonal entries equal.
+    initial_probs
+        ``(r,)`` initial mode probabilities (default uniform).
+    maps
+        One :class:`StateMap` (or None for the identity) per filter; default
+        all identity (every mode has the common state).
+    name
+        Label in results.
+    """
+
+    filters: Sequence[Any]
+    transition: Any = 0.95
+    initial_probs: Any = None
+    maps: Sequence[StateMap | None] | None = None
+    name: str = "IMM"
+
+    def __post_init__(self) -> None:
+        filters = tuple(self.filters)
+        r = len(filters)
+        if r < 1:
+            raise ValueError("filters: the IMM needs at least one model-matched filter")
+        for f in filters:
+            if not (callable(getattr(f, "init", None)) and callable(getattr(f, "step", None))):
+                raise TypeError(f"filters: {type(f).__name__} is not a filter (needs init and step)")
+        object.__setattr__(self, "filters", filters)
+        if np.ndim(self.transition) == 0:
+            p = float(self.transition)
+            if not 0.0 <= p <= 1.0:
+                raise ValueError(f"transition: a staying probability must lie in [0, 1], got {p}")
+            T = np.full((r, r), (1.0 - p) / (r - 1) if r > 1 else 0.0)
+            np.fill_diagonal(T, p if r > 1 else 1.0)
+        else:
+            T = self.transition
+        object.__setattr__(self, "transition", _check_transition(T, r))
+        mu0 = np.full(r, 1.0 / r) if self.initial_probs is None else np.array(self.initial_probs, dtype=float)
+        if mu0.shape != (r,) or not np.all(np.isfinite(mu0)) or np.any(mu0 < 0) or not np.isclose(mu0.sum(), 1.0):
+            raise ValueError(f"initial_probs: expected {r} non-negative probabilities summing to 1, got {self.initial_probs!r}")
+        object.__setattr__(self, "initial_probs", mu0 / mu0.sum())
+        maps = (None,) * r if self.maps is None else tuple(self.maps)
+        if len(maps) != r:
+            raise ValueError(f"maps: expected {r} entries (one per filter), got {len(maps)}")
+        dims = {m.dim for m in maps if m is not None}
+        if len(dims) > 1:
+            raise ValueError(f"maps: all maps must target the same common dimension, got {sorted(dims)}")
+        object.__setattr__(self, "maps", maps)
+        if not self.name:
+            object.__setattr__(self, "name", "IMM")
+
+    @property
+    def modes(self) -> int:
+        """Number of modes r."""
+        return len(self.filters)
+
+    # -- helpers --------------------------------------------------------------
+    def _to_common(self, j: int, mean: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        m = self.maps[j]
+        return (mean, cov) if m is None else m.to_common(mean, cov)
+
+    def _to_mode(self, j: int, mean: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        m = self.maps[j]
+        return (mean, cov) if m is None else m.to_mode(mean, cov)
+
+    def _common(self, states) -> tuple[np.ndarray, np.ndarray]:
+        """Mode estimates in the common state, stacked: ``(*b, r, n)``, ``(*b, r, n, n)``."""
+        means, covs = [], []
+        for j, s in enumerate(states):
+            m, c = self._to_common(j, s.mean, s.cov)
+            means.append(m)
+            covs.append(np.broadcast_to(c, (*m.shape, m.shape[-1])))
+        return np.stack(means, axis=-2), np.stack(covs, axis=-3)
+
+    # -- protocol ---------------------------------------------------------------
+    def init(self, prior: Gaussian, batch: tuple[int, ...] = (), rng: RNGLike = None) -> IMMState:
+        """Every mode starts from the prior (its marginal for smaller modes); μ = initial_probs."""
+        if not isinstance(prior, Gaussian):
+            prior = Gaussian(*prior)
+        batch = tuple(batch)
+        if prior.mean.ndim > 1 and not batch:
+            batch = prior.mean.shape[:-1]
+        mean, cov = prior.broadcast(batch)
+        for j, m in enumerate(self.maps):
+            if m is not None and m.dim != prior.dim:
+                raise ValueError(f"prior: dimension {prior.dim} differs from the common state of maps[{j}] ({m.dim})")
+        states = []
+        for j, f in enumerate(self.filters):
+            mj, cj = self._to_mode(j, mean, cov)
+            states.append(f.init(Gaussian(mj, cj), batch=batch, rng=rng))
+        probs = np.broadcast_to(self.initial_probs, (*batch, self.modes)).copy()
+        return IMMState(mean, np.array(cov), 0, tuple(states), probs)
+
+    def step(
+        self, state: IMMState, z: np.ndarray, k: int | None = None, dt: float | None = None
+    ) -> tuple[IMMState, dict[str, np.ndarray]]:
+        """One IMM cycle: mix, run every mode, update μ, combine."""
+        k = state.k + 1 if k is None else int(k)
+        batch = state.batch
+        Pi = self.transition
+        mu = state.probs
+        c_bar = np.einsum("...i,ij->...j", mu, Pi)  # (*b, r)
+        w = mu[..., :, None] * Pi  # (*b, i, j) = Π_ij μ_i
+        safe = np.where(c_bar > 0, c_bar, 1.0)
+        w = np.where(c_bar[..., None, :] > 0, w / safe[..., None, :], mu[..., :, None])
+
+        X, P = self._common(state.modes)  # (*b, r, n), (*b, r, n, n)
+        x0 = np.einsum("...ij,...in->...jn", w, X)  # (*b, j, n)
+        d = X[..., :, None, :] - x0[..., None, :, :]  # (*b, i, j, n)
+        P0 = np.einsum("...ij,...inm->...jnm", w, P) + np.einsum("...ij,...ijn,...ijm->...jnm", w, d, d)
+
+        new_states, infos = [], []
+        for j, f in enumerate(self.filters):
+            # Contiguous copies keep einsum's summation order independent of the batch.
+            xj = np.ascontiguousarray(x0[..., j, :])
+            mj, cj = self._to_mode(j, xj, np.ascontiguousarray(symmetrize(P0[..., j, :, :])))
+            s, info = f.step(replace(state.modes[j], mean=mj, cov=cj), z, k=k, dt=dt)
+            new_states.append(s)
+            infos.append(info)
+
+        mode_ll = np.stack([np.broadcast_to(i["loglik"], batch) for i in infos], axis=-1)  # (*b, r)
+        with np.errstate(divide="ignore"):
+            log_prior = np.log(c_bar)
+        log_post = log_prior + mode_ll
+        top = np.max(log_post, axis=-1, keepdims=True)
+        e = np.exp(log_post - top)
+        total = e.sum(axis=-1, keepdims=True)
+        probs = e / total
+        loglik_mixture = (top + np.log(total))[..., 0]
+
+        X, P = self._common(new_states)
+        mean = np.einsum("...j,...jn->...n", probs, X)
+        d = X - mean[..., None, :]
+        cov = symmetrize(np.einsum("...j,...jnm->...nm", probs, P) + np.einsum("...j,...jn,...jm->...nm", probs, d, d))
+
+        info = _mixture_info(infos, c_bar, batch)
+        info["mode_probs"] = probs
+        info["mode_loglik"] = mode_ll
+        info["loglik_mixture"] = loglik_mixture
+        return IMMState(mean, cov, k, tuple(new_states), probs), info
+
+
+def _mixture_info(infos: list[dict[str, np.ndarray]], c_bar: np.ndarray, batch: tuple[int, ...]) -> dict[str, np.ndarray]:
+    """Moment-matched predicted-measurement Gaussian of the modes, weighted by c̄."""
+    nus = np.stack([np.broadcast_to(i["innovation"], (*batch, i["innovation"].shape[-1])) for i in infos], axis=-2)
+    m = nus.shape[-1]
+    Ss = np.stack([np.broadcast_to(i["S"], (*batch, m, m)) for i in infos], axis=-3)
+    valid = ~np.isnan(nus[..., 0, :])  # the same measurement for every mode
+    nus0 = np.where(valid[..., None, :], nus, 0.0)
+    nu = np.einsum("...j,...jm->...m", c_bar, nus0)
+    d = nus0 - nu[..., None, :]
+    S = symmetrize(np.einsum("...j,...jab->...ab", c_bar, Ss) + np.einsum("...j,...ja,...jb->...ab", c_bar, d, d))
+    S_inv = inv_spd(S)
+    dof = valid.sum(axis=-1)
+    nis = quad(nu, S_inv)
+    loglik = -0.5 * (nis + logdet_spd(S) + dof * _LOG_2PI)
+    measured = dof > 0
+    return {
+        "innovation": np.where(valid, nu, np.nan),
+        "S": S,
+        "nis": np.where(measured, nis, np.nan),
+        "dof": dof,
+        "loglik": np.where(measured, loglik, 0.0),
+    }
