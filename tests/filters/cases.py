@@ -11,7 +11,15 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 import pursuit as pu
-from pursuit.scenarios import LinearCV, WSNRange
+from pursuit.filters import (
+    AdaptiveCSFilter,
+    CurrentStatisticalFilter,
+    InteractingMultipleModel,
+    ModifiedSingerFilter,
+    kinematic_map,
+)
+from pursuit.models import ConstantVelocity, Singer
+from pursuit.scenarios import LinearCV, ManeuveringTarget, WSNRange
 
 
 @dataclass(frozen=True)
@@ -31,16 +39,34 @@ class Case:
         For approximate filters (particle filters), the allowed relative
         deviation of the mean NIS from the measurement dimension on the
         linear model.
+    scenario
+        A scenario of its own for filters that need a particular state
+        layout (the CS-model filters need ``[p, v, a]`` per axis); the
+        shared linear and nonlinear scenarios are then skipped.
     """
 
     id: str
     build: Callable[[Any], Any]
     exact_on_linear: bool = True
     nis_tolerance: float = 0.0
+    scenario: Any = None
 
 
 LINEAR = LinearCV(ndim=2, steps=25, q=0.05, sigma=1.0)
 NONLINEAR = WSNRange(steps=25)
+MANEUVER = ManeuveringTarget(horizon=27, maneuvers=[{"axis": "y", "start": 10, "stop": 18, "accel": 40.0}])
+
+
+def _singer_kf(s, alpha, sigma):
+    return pu.KalmanFilter(Singer(alpha=alpha, sigma=sigma, ndim=3, dt=s.dt), s.measurement)
+
+
+def _imm_cv_singer(s):
+    cv = ConstantVelocity(ndim=3, dt=s.dt, q=0.5)
+    meas_cv = pu.models.LinearGaussian.position(cv.dim, cv.position_indices, s.R**0.5)
+    singer = Singer(alpha=0.1, sigma=30.0, ndim=3, dt=s.dt)
+    modes = [pu.KalmanFilter(cv, meas_cv), pu.KalmanFilter(singer, s.measurement)]
+    return InteractingMultipleModel(modes, 0.9, maps=[kinematic_map(cv, singer, fill_var=1.0), None], name="IMM-CV-Singer")
 
 CASES = [
     Case("kf", lambda s: pu.KalmanFilter(s.motion, s.measurement)),
@@ -49,6 +75,25 @@ CASES = [
     Case("ukf-alpha", lambda s: pu.UnscentedKalmanFilter(s.motion, s.measurement, alpha=0.5, beta=2.0, kappa=1.0)),
     Case("ckf", lambda s: pu.CubatureKalmanFilter(s.motion, s.measurement)),
     Case("ekf-fading", lambda s: pu.ExtendedKalmanFilter(s.motion, s.measurement, fading=pu.Constant(1.05)), exact_on_linear=False),
+    Case(
+        "imm-ekf",
+        lambda s: InteractingMultipleModel(
+            [pu.ExtendedKalmanFilter(s.motion, s.measurement), pu.ExtendedKalmanFilter(type(s.motion)(ndim=2, q=1.0), s.measurement)],
+            0.95,
+        ),
+        exact_on_linear=False,
+    ),
+    Case("cs", lambda s: CurrentStatisticalFilter(s.measurement, dt=s.dt), exact_on_linear=False, scenario=MANEUVER),
+    Case("apcs", lambda s: AdaptiveCSFilter(s.measurement, dt=s.dt), exact_on_linear=False, scenario=MANEUVER),
+    Case("ms", lambda s: ModifiedSingerFilter(s.measurement, dt=s.dt, warmup=3), exact_on_linear=False, scenario=MANEUVER),
+    Case("kf-singer", lambda s: _singer_kf(s, 0.05, 20.0), exact_on_linear=False, scenario=MANEUVER),
+    Case(
+        "imm-singer",
+        lambda s: InteractingMultipleModel([_singer_kf(s, a, q) for a, q in ((1 / 60, 5.0), (1 / 20, 20.0), (1 / 5, 60.0))], 0.95),
+        exact_on_linear=False,
+        scenario=MANEUVER,
+    ),
+    Case("imm-cv-singer", _imm_cv_singer, exact_on_linear=False, scenario=MANEUVER),
 ]
 
-NONLINEAR_CASES = [c for c in CASES if c.id != "kf"]
+NONLINEAR_CASES = [c for c in CASES if c.id != "kf" and c.scenario is None]

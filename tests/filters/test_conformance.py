@@ -24,6 +24,8 @@ def _run(filt, sim, runs, seed=7, zs=None, **kw):
 
 
 def _scenarios(case):
+    if case.scenario is not None:
+        return [case.scenario]
     return [LINEAR] if case not in NONLINEAR_CASES else [LINEAR, NONLINEAR]
 
 

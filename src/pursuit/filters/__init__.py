@@ -1,5 +1,6 @@
 """Filters: each has ``init(prior, batch, rng)`` and ``step(state, z, k) -> (state, info)``."""
 
+from .cs import AdaptiveCSFilter, CurrentStatisticalFilter, ModifiedSingerFilter
 from .fading import Constant, Fade, FadingContext, FadingStrategy, NoFading
 from .gaussian import (
     CubatureKalmanFilter,
@@ -8,6 +9,7 @@ from .gaussian import (
     KalmanFilter,
     UnscentedKalmanFilter,
 )
+from .imm import InteractingMultipleModel, StateMap, kinematic_map
 from .smoother import SmoothedTrack, rts_smooth
 
 __all__ = [
@@ -16,6 +18,12 @@ __all__ = [
     "UnscentedKalmanFilter",
     "CubatureKalmanFilter",
     "GaussianState",
+    "CurrentStatisticalFilter",
+    "AdaptiveCSFilter",
+    "ModifiedSingerFilter",
+    "InteractingMultipleModel",
+    "StateMap",
+    "kinematic_map",
     "Constant",
     "NoFading",
     "Fade",

@@ -164,15 +164,14 @@ class ManeuveringTarget:
     """A target maneuvering on a schedule, measured in position on every axis (paper P4).
 
     State ``[x, vx, ax, y, vy, ay, z, vz, az]`` (fewer axes when
-    ``position`` is shorter).  Filtering starts at the third measurement;
-    ``steps`` counts all measurements, so a run has ``steps − 2`` filter
-    steps.
+    ``position`` is shorter).  Filtering starts at the third measurement:
+    a run has ``steps = horizon − 2`` filter steps.
 
     Parameters
     ----------
-    steps
-        Number of measurements including the two used for initialisation
-        (paper: 100).
+    horizon
+        Number of measurement epochs t_1 … t_horizon, including the two
+        used for initialisation (paper: 100 steps).
     dt
         Sampling period T (s).
     position, velocity
@@ -202,7 +201,7 @@ class ManeuveringTarget:
     model matches the schedule.
     """
 
-    steps: int = 100
+    horizon: int = 100
     dt: float = 1.0
     position: Any = (200e3, 200e3, 200e3)
     velocity: Any = (0.0, 400.0, 10.0)
@@ -215,9 +214,9 @@ class ManeuveringTarget:
     measurement: LinearGaussian = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        steps = positive_int("steps", self.steps)
-        if steps < 3:
-            raise ValueError(f"steps: needs at least 3 (two for initialisation), got {steps}")
+        horizon = positive_int("horizon", self.horizon)
+        if horizon < 3:
+            raise ValueError(f"horizon: needs at least 3 (two for initialisation), got {horizon}")
         object.__setattr__(self, "dt", positive("dt", self.dt))
         pos = as_vector("position", self.position)
         if not 1 <= pos.size <= 3:
@@ -246,9 +245,9 @@ class ManeuveringTarget:
         return AXES[: self.position.size]
 
     @property
-    def filter_steps(self) -> int:
-        """Number of filter steps K = steps − 2."""
-        return self.steps - 2
+    def steps(self) -> int:
+        """Number of filter steps K = horizon − 2."""
+        return self.horizon - 2
 
     @property
     def state_labels(self) -> tuple[str, ...]:
@@ -272,17 +271,17 @@ class ManeuveringTarget:
 
     @property
     def times(self) -> np.ndarray:
-        """Times of the filter steps, t_3 … t_steps (s)."""
-        return self.dt * np.arange(3, self.steps + 1)
+        """Times of the filter steps, t_3 … t_horizon (s)."""
+        return self.dt * np.arange(3, self.horizon + 1)
 
     # -- truth -------------------------------------------------------------------
     def _integrate(self) -> np.ndarray:
-        """True states at t_1 … t_steps, ``(steps, 3A)``."""
+        """True states at t_1 … t_horizon, ``(horizon, 3A)``."""
         A, T = len(self.axes), self.dt
         p, v = self.position.copy(), self.velocity.copy()
         a_now = np.zeros(A)
-        out = np.empty((self.steps, 3 * A))
-        for i in range(self.steps):
+        out = np.empty((self.horizon, 3 * A))
+        for i in range(self.horizon):
             t = (i + 1) * T
             acc = np.zeros(A)  # no segment: no acceleration (constant velocity)
             turning: list[int] = []
@@ -306,7 +305,7 @@ class ManeuveringTarget:
         return out
 
     def true_states(self) -> np.ndarray:
-        """True states at t_1 … t_steps, ``(steps, 3A)`` (read-only)."""
+        """True states at t_1 … t_horizon, ``(horizon, 3A)`` (read-only)."""
         return self._truth
 
     def maneuvering(self) -> np.ndarray:
@@ -331,7 +330,7 @@ class ManeuveringTarget:
         return np.kron(np.eye(len(self.axes)), block)
 
     def simulate(self, rng: RNGLike, runs: int | None = None) -> Simulation:
-        """Measurements for ``runs`` runs: run i draws its noise (``(steps, A)`` normals) from stream i."""
+        """Measurements for ``runs`` runs: run i draws its noise (``(horizon, A)`` normals) from stream i."""
         rng = as_rng(rng)
         if runs is None:
             if not isinstance(rng, RunStreams):
@@ -340,10 +339,10 @@ class ManeuveringTarget:
         runs = positive_int("runs", runs)
         A, T = len(self.axes), self.dt
         n = 3 * A
-        noise = rng.standard_normal((runs, self.steps, A))
+        noise = rng.standard_normal((runs, self.horizon, A))
         truth_all = self._truth
         pos = truth_all[:, 0::3]  # (steps, A)
-        zs_all = pos[:, None, :] + np.sqrt(self.R) * np.swapaxes(noise, 0, 1)  # (steps, M, A)
+        zs_all = pos[:, None, :] + np.sqrt(self.R) * np.swapaxes(noise, 0, 1)  # (horizon, M, A)
         P0 = self.prior_covariance()
         if self.init == "two-point":
             z1, z2 = zs_all[0], zs_all[1]
@@ -353,7 +352,7 @@ class ManeuveringTarget:
         else:
             offset = rng.standard_normal((runs, n))
             mean = truth_all[1] + np.einsum("ij,mj->mi", np.linalg.cholesky(P0), offset)
-        truth = np.broadcast_to(truth_all[2:, None, :], (self.filter_steps, runs, n)).copy()
+        truth = np.broadcast_to(truth_all[2:, None, :], (self.steps, runs, n)).copy()
         return Simulation(
             truth=truth,
             measurements=zs_all[2:].copy(),
