@@ -28,6 +28,8 @@ _COMPONENT_MODULES = (
     "pursuit.components.scenarios",
     "pursuit.components.filters",
     "pursuit.components.experiments",
+    "pursuit.components.maneuver",
+    "pursuit.components.maneuver_experiment",
 )
 
 
