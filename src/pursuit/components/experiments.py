@@ -18,6 +18,7 @@ from ..results import MonteCarloResult
 __all__ = [
     "MonteCarloPlan",
     "build_scenario",
+    "build_filter",
     "build_filters",
     "summary_table",
     "consistency_table",
@@ -53,6 +54,16 @@ def build_scenario(sections: dict[str, Any]) -> Any:
     return comp.build(where="scenario", **comp.resolve(values, "scenario"))
 
 
+def build_filter(entry: dict[str, Any], scenario: Any, where: str) -> Any:
+    """Build one filter table ``{type = ..., ...}`` against the scenario; errors are prefixed with ``where``."""
+    values = dict(entry)
+    kind = values.pop("type", None)
+    if kind is None:
+        raise ValueError(f"{where}.type: required (see `pursuit list`)")
+    comp = registry.get("filter", kind, f"{where}.type")
+    return comp.build(scenario=scenario, where=where, **comp.resolve(values, where))
+
+
 def build_filters(sections: dict[str, Any], scenario: Any) -> list[Any]:
     """Build every ``[[filters]]`` entry against the scenario."""
     entries = sections.get("filters")
@@ -60,15 +71,7 @@ def build_filters(sections: dict[str, Any], scenario: Any) -> list[Any]:
         raise ValueError("filters: required section is missing (add [[filters]] tables)")
     if not isinstance(entries, list) or not entries or not all(isinstance(e, dict) for e in entries):
         raise ValueError("filters: expected one or more [[filters]] tables")
-    out = []
-    for i, entry in enumerate(entries):
-        where = f"filters[{i}]"
-        values = dict(entry)
-        kind = values.pop("type", None)
-        if kind is None:
-            raise ValueError(f"{where}.type: required (see `pursuit list`)")
-        comp = registry.get("filter", kind, f"{where}.type")
-        out.append(comp.build(scenario=scenario, where=where, **comp.resolve(values, where)))
+    out = [build_filter(entry, scenario, f"filters[{i}]") for i, entry in enumerate(entries)]
     try:
         return validate_filters(out)
     except ValueError as e:

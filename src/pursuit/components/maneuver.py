@@ -17,6 +17,7 @@ from ..filters.imm import InteractingMultipleModel
 from ..models import maneuver as mm
 from ..registry import Param, register
 from ..scenarios.maneuver import DEFAULT_SCHEDULE, ManeuveringTarget, parse_schedule
+from .experiments import build_filter
 from .filters import NAME
 
 # --------------------------------------------------------------------------
@@ -49,6 +50,9 @@ def _schedule(field: str, value: Any):
     return parse_schedule(value, field)
 
 
+_DEFAULT_TABLES = [{"axis": m.axis, "start": m.start, "stop": m.stop, "accel": m.accel} for m in DEFAULT_SCHEDULE]
+
+
 @register(
     "scenario",
     "maneuver-3d",
@@ -62,7 +66,7 @@ def _schedule(field: str, value: Any):
         Param(
             "maneuvers",
             "any",
-            DEFAULT_SCHEDULE,
+            _DEFAULT_TABLES,
             "[[scenario.maneuvers]] tables: {axis, start, stop, accel} or {plane, start, stop, rate (deg/s)}; default: spec 04 schedule",
             check=_schedule,
         ),
@@ -221,13 +225,5 @@ def _imm_singer(scenario, where="filter", name=None, models=None, transition=0.9
 def _imm(scenario, where="filter", name=None, models=None, transition=0.95, initial_probs=None):
     if not isinstance(models, list) or not models or not all(isinstance(m, dict) for m in models):
         raise ValueError(f"{where}.models: expected a list of filter tables")
-    filters = []
-    for i, entry in enumerate(models):
-        sub = f"{where}.models[{i}]"
-        values = dict(entry)
-        kind = values.pop("type", None)
-        if kind is None:
-            raise ValueError(f"{sub}.type: required")
-        comp = registry.get("filter", kind, f"{sub}.type")
-        filters.append(comp.build(scenario=scenario, where=sub, **comp.resolve(values, sub)))
+    filters = [build_filter(entry, scenario, f"{where}.models[{i}]") for i, entry in enumerate(models)]
     return _reanchor(where, lambda: InteractingMultipleModel(filters, transition, initial_probs, name=name or "IMM"))
