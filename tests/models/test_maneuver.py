@@ -323,8 +323,10 @@ def test_coordinated_turn_transition_and_jacobian(ndim, rng):
     np.testing.assert_allclose(J, J_num, rtol=1e-6, atol=1e-6)
 
 
-def test_coordinated_turn_ekf_recovers_the_turn_rate():
-    from pursuit import ExtendedKalmanFilter, Gaussian, run
+@pytest.mark.parametrize("filter_name", ["ExtendedKalmanFilter", "UnscentedKalmanFilter"])
+def test_coordinated_turn_filters_recover_the_turn_rate(filter_name):
+    import pursuit
+    from pursuit import Gaussian, run
     from pursuit.models import LinearGaussian
 
     truth_model = CoordinatedTurn(q=0.0, q_omega=0.0, dt=1.0)
@@ -336,7 +338,7 @@ def test_coordinated_turn_ekf_recovers_the_turn_rate():
     states = np.array(states)
     meas = LinearGaussian.position(5, (0, 2), 1e-3)
     zs = states[:, None, [0, 2]]
-    filt = ExtendedKalmanFilter(CoordinatedTurn(q=1e-6, q_omega=1e-8, dt=1.0), meas)
+    filt = getattr(pursuit, filter_name)(CoordinatedTurn(q=1e-6, q_omega=1e-8, dt=1.0), meas)
     prior = Gaussian([0.0, 100.0, 0.0, 0.0, 0.0], np.diag([1.0, 4.0, 1.0, 4.0, 0.01]))
     track = run(filt, zs, prior)
     assert track.mean[-1, 0, 4] == pytest.approx(0.04, rel=1e-3)

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from .._validation import in_range, nonnegative, positive, positive_int
+from .._validation import in_range, nonnegative, positive
 from ..gaussian import Gaussian
 from ..models.maneuver import (
     CS_VARIANCE_FACTOR,

@@ -30,12 +30,12 @@ probabilities, ``innovation = Σ c̄_j ν_j`` (= z − Σ c̄_j ẑ_j) and
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any, Sequence
 
 import numpy as np
 
-from .._linalg import inv_spd, logdet_spd, mv, quad, symmetrize
+from .._linalg import inv_spd, logdet_spd, quad, symmetrize
 from ..gaussian import Gaussian
 from ..rng import RNGLike
 
