@@ -1,0 +1,143 @@
+"""Maneuvering-target filters: pursuit (batched over runs) against FilterPy's IMM (one run at a time).
+
+Work: paper P4's scenario (``maneuver-3d``, spec default schedule): 9-state
+target, 3-D position measurements, 98 filter steps; M runs.  A filter-step
+is one predict + update of one run (all three axes).
+
+Rows:
+
+* ``pursuit CS``, ``pursuit APCS``, ``pursuit MS``: the per-axis CS-family
+  filters, batched over runs and axes.
+* ``pursuit IMM-Singer``: IMM over three Singer-model Kalman filters.
+* ``pursuit APCS, one run at a time``: the same filter called with a batch
+  of one, run after run (what a loop over runs would cost).
+* ``FilterPy IMM-Singer``: ``filterpy.kalman.IMMEstimator`` over three
+  ``KalmanFilter`` objects with the same Singer F and Q, one run at a time.
+
+Run::
+
+    .venv/bin/python benchmarks/bench_maneuver.py          # FilterPy row if filterpy is importable
+    make bench                                               # all benchmarks, peers in .bench-venv
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+
+import numpy as np
+
+import pursuit as pu
+from pursuit.filters import AdaptiveCSFilter, CurrentStatisticalFilter, InteractingMultipleModel, ModifiedSingerFilter
+from pursuit.models import Singer
+from pursuit.rng import run_streams
+from pursuit.scenarios import ManeuveringTarget
+
+REPEATS = 3
+SINGER_MODES = ((1 / 60, 5.0), (1 / 20, 20.0), (1 / 5, 60.0))
+
+
+def _time(fn, repeats: int = REPEATS) -> float:
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def _work(runs: int):
+    sc = ManeuveringTarget()
+    return sc, sc.simulate(run_streams(0, range(runs), 0), runs)
+
+
+def _filters(sc):
+    meas = sc.measurement
+    return {
+        "CS": CurrentStatisticalFilter(meas),
+        "APCS": AdaptiveCSFilter(meas),
+        "MS": ModifiedSingerFilter(meas),
+        "IMM-Singer": InteractingMultipleModel(
+            [pu.KalmanFilter(Singer(alpha=a, sigma=s, ndim=3), meas) for a, s in SINGER_MODES], 0.95
+        ),
+    }
+
+
+def pursuit_rate(name: str, runs: int) -> float:
+    """Filter-steps per second, all runs in one batch."""
+    sc, sim = _work(runs)
+    filt = _filters(sc)[name]
+    t = _time(lambda: pu.run(filt, sim.measurements, sim.prior, keep_cov=False))
+    return runs * sc.steps / t
+
+
+def pursuit_loop_rate(name: str, runs: int) -> float:
+    """Filter-steps per second when the same filter is called one run at a time."""
+    sc, sim = _work(runs)
+    filt = _filters(sc)[name]
+
+    def go():
+        for i in range(runs):
+            prior = pu.Gaussian(sim.prior.mean[i : i + 1], sim.prior.cov)
+            pu.run(filt, sim.measurements[:, i : i + 1], prior, keep_cov=False)
+
+    return runs * sc.steps / _time(go)
+
+
+def filterpy_rate(runs: int) -> float | None:
+    """FilterPy IMMEstimator over three Singer KFs, one run at a time (None if not installed)."""
+    try:
+        from filterpy.kalman import IMMEstimator, KalmanFilter
+    except ImportError:
+        return None
+    sc, sim = _work(runs)
+    H = np.array(sc.measurement.matrix())
+    R = np.array(sc.measurement.cov())
+    models = [Singer(alpha=a, sigma=s, ndim=3) for a, s in SINGER_MODES]
+    M = np.full((3, 3), 0.025)
+    np.fill_diagonal(M, 0.95)
+
+    def go():
+        for i in range(runs):
+            kfs = []
+            for m in models:
+                kf = KalmanFilter(dim_x=9, dim_z=3)
+                kf.F = np.array(m.transition_matrix())
+                kf.Q = np.array(m.cov())
+                kf.H, kf.R = H, R
+                kf.x = sim.prior.mean[i].reshape(9, 1).copy()
+                kf.P = np.array(sim.prior.cov)
+                kfs.append(kf)
+            imm = IMMEstimator(kfs, np.full(3, 1 / 3), M)
+            for k in range(sc.steps):
+                imm.predict()
+                imm.update(sim.measurements[k, i].reshape(3, 1))
+
+    return runs * sc.steps / _time(go)
+
+
+def main(quick: bool = False) -> list[dict]:
+    """Measure and print a markdown table; returns the rows."""
+    runs = 100 if quick else 1000
+    loop_runs = 5 if quick else 20
+    rows = []
+    for name in ("CS", "APCS", "MS", "IMM-Singer"):
+        rows.append({"implementation": f"pursuit {name}", "runs": runs, "rate": pursuit_rate(name, runs)})
+    rows.append({"implementation": "pursuit APCS, one run at a time", "runs": loop_runs, "rate": pursuit_loop_rate("APCS", loop_runs)})
+    rows.append({"implementation": "pursuit IMM-Singer, one run at a time", "runs": loop_runs, "rate": pursuit_loop_rate("IMM-Singer", loop_runs)})
+    fp = filterpy_rate(loop_runs)
+    if fp is not None:
+        rows.append({"implementation": "FilterPy IMM-Singer (one run at a time)", "runs": loop_runs, "rate": fp})
+    print("| implementation | runs x steps | k filter-steps/s | vs FilterPy IMM |")
+    print("|---|---|---|---|")
+    for r in rows:
+        ratio = f"{r['rate'] / fp:.1f}x" if fp else "n/a (filterpy not installed)"
+        r["vs_filterpy"] = r["rate"] / fp if fp else None
+        print(f"| {r['implementation']} | {r['runs']} x 98 | {r['rate'] / 1e3:.1f} | {ratio} |")
+    return rows
+
+
+if __name__ == "__main__":
+    import sys
+
+    main(quick="--quick" in sys.argv)
