@@ -27,7 +27,10 @@ _COMPONENT_MODULES = (
     "pursuit.components.models",
     "pursuit.components.scenarios",
     "pursuit.components.filters",
+    "pursuit.components.fading",
     "pursuit.components.experiments",
+    "pursuit.components.underwater",
+    "pursuit.components.conditions",
 )
 
 

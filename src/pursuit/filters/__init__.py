@@ -1,6 +1,7 @@
 """Filters: each has ``init(prior, batch, rng)`` and ``step(state, z, k) -> (state, info)``."""
 
 from .fading import Constant, Fade, FadingContext, FadingStrategy, NoFading
+from .fading_adaptive import ExponentiallyWeighted, StrongTracking
 from .gaussian import (
     CubatureKalmanFilter,
     ExtendedKalmanFilter,
@@ -8,6 +9,7 @@ from .gaussian import (
     KalmanFilter,
     UnscentedKalmanFilter,
 )
+from .ifmkf import Improved
 from .smoother import SmoothedTrack, rts_smooth
 
 __all__ = [
@@ -18,6 +20,9 @@ __all__ = [
     "GaussianState",
     "Constant",
     "NoFading",
+    "ExponentiallyWeighted",
+    "StrongTracking",
+    "Improved",
     "Fade",
     "FadingContext",
     "FadingStrategy",

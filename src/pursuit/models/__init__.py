@@ -1,11 +1,19 @@
 """Motion and measurement models, vectorised over any leading batch axes."""
 
 from .measurement import LinearGaussian, RangeBearing, RangeSensors, TimeOfArrival, gaussian_loglik, wrap_angle
+from .linear_motion import LinearMotion
 from .motion import ConstantAcceleration, ConstantVelocity
+from .toa import PositionFix, l_array, toa_position, trilaterate, trilateration_jacobian
 
 __all__ = [
     "ConstantVelocity",
     "ConstantAcceleration",
+    "LinearMotion",
+    "PositionFix",
+    "l_array",
+    "toa_position",
+    "trilaterate",
+    "trilateration_jacobian",
     "LinearGaussian",
     "RangeSensors",
     "RangeBearing",

@@ -2,6 +2,7 @@
 
 from .base import Simulation, simulate_markov
 from .linear import LinearCV
+from .underwater import UnderwaterTOA
 from .wsn import WSNRange
 
-__all__ = ["Simulation", "simulate_markov", "WSNRange", "LinearCV"]
+__all__ = ["Simulation", "simulate_markov", "WSNRange", "LinearCV", "UnderwaterTOA"]
