@@ -49,6 +49,16 @@ CASES = [
     Case("ukf-alpha", lambda s: pu.UnscentedKalmanFilter(s.motion, s.measurement, alpha=0.5, beta=2.0, kappa=1.0)),
     Case("ckf", lambda s: pu.CubatureKalmanFilter(s.motion, s.measurement)),
     Case("ekf-fading", lambda s: pu.ExtendedKalmanFilter(s.motion, s.measurement, fading=pu.Constant(1.05)), exact_on_linear=False),
+    # adaptive fading strategies (paper P2 and the strong tracking filter): λ can exceed 1
+    Case("kf-ewfmkf", lambda s: pu.KalmanFilter(s.motion, s.measurement, fading=pu.ExponentiallyWeighted()), exact_on_linear=False),
+    Case("ekf-ewfmkf", lambda s: pu.ExtendedKalmanFilter(s.motion, s.measurement, fading=pu.ExponentiallyWeighted(b=0.9)), exact_on_linear=False),
+    Case("ekf-stf", lambda s: pu.ExtendedKalmanFilter(s.motion, s.measurement, fading=pu.StrongTracking()), exact_on_linear=False),
+    Case("ukf-stf", lambda s: pu.UnscentedKalmanFilter(s.motion, s.measurement, fading=pu.StrongTracking(rho=0.8, beta=1.5)), exact_on_linear=False),
+    Case("kf-ifmkf", lambda s: pu.KalmanFilter(s.motion, s.measurement, fading=pu.Improved()), exact_on_linear=False),
+    Case("ekf-ifmkf", lambda s: pu.ExtendedKalmanFilter(s.motion, s.measurement, fading=pu.Improved()), exact_on_linear=False),
+    Case("ckf-ifmkf", lambda s: pu.CubatureKalmanFilter(s.motion, s.measurement, fading=pu.Improved(beta=1.0, search="minimise", grid=24)), exact_on_linear=False),
+    Case("ukf-ifmkf-instant", lambda s: pu.UnscentedKalmanFilter(s.motion, s.measurement, fading=pu.Improved(beta=1.0, test="instant", search="stf")), exact_on_linear=False),
 ]
 
-NONLINEAR_CASES = [c for c in CASES if c.id != "kf"]
+# The plain Kalman filter needs linear models.
+NONLINEAR_CASES = [c for c in CASES if c.id != "kf" and not c.id.startswith("kf-")]

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..filters.fading_adaptive import ExponentiallyWeighted, StrongTracking
-from ..filters.ifmkf import SEARCHES, TESTS, Improved
+from ..filters.ifmkf import SEARCHES, TESTS, UNREACHABLE, Improved
 from ..registry import Param, register
 
 LAM_MAX = Param("lam_max", "float", None, "upper bound on the fading factor (default: none)")
@@ -64,6 +64,7 @@ def _stf(**kw) -> StrongTracking:
         Param("gate_factor", "float", 10.0, "a residual above gate_factor * threshold is an outlier"),
         Param("gate_max", "int", 2, "at most this many consecutive gated steps"),
         Param("rho", "float", 0.95, "forgetting factor for search = stf"),
+        Param("unreachable", "str", "lam_max", "if lam_max cannot fit the observation: use lam_max, or the grid minimiser", choices=UNREACHABLE),
     ),
     aliases=("improved",),
 )
