@@ -69,10 +69,10 @@ def inv_spd(S: np.ndarray) -> np.ndarray:
     """Inverse of a stack of symmetric positive-definite matrices.
 
     Sizes 1 to 3 use closed forms (about 20x faster than LAPACK on stacks of
-    tiny matrices); larger sizes call ``np.linalg.inv``.  A matrix whose
-    closed-form determinant comes out non-positive (an ill-conditioned S,
-    e.g. a huge predicted covariance against a tiny R) is inverted by an
-    eigendecomposition instead.
+    tiny matrices); larger sizes call ``np.linalg.inv``.  Cofactor formulas
+    lose accuracy when the determinant is tiny against the product of the
+    diagonal (an ill-conditioned S, e.g. a huge predicted covariance against
+    a tiny R); such matrices are inverted by an eigendecomposition instead.
     """
     m = S.shape[-1]
     if m == 1:
@@ -108,9 +108,20 @@ def inv_spd(S: np.ndarray) -> np.ndarray:
     return np.linalg.inv(S)
 
 
+# The cofactor determinant of an SPD matrix has a relative error of about
+# eps * prod(diag) / det; below this ratio the closed forms hand over to LAPACK.
+_CLOSED_FORM_MIN_RATIO = 1e-6
+
+
+def _imprecise(S: np.ndarray, det: np.ndarray) -> np.ndarray:
+    """True where a closed-form determinant (or inverse) of S cannot be trusted."""
+    scale = np.prod(np.diagonal(S, axis1=-2, axis2=-1), axis=-1)
+    return ~(det > _CLOSED_FORM_MIN_RATIO * scale)
+
+
 def _fix_lost_precision(S: np.ndarray, det: np.ndarray, out: np.ndarray) -> np.ndarray:
-    """Re-invert, by eigendecomposition, the matrices whose closed-form determinant is not positive."""
-    bad = ~(det > 0)
+    """Re-invert, by eigendecomposition, the matrices whose closed form lost precision."""
+    bad = _imprecise(S, det)
     if np.any(bad):
         out[bad] = np.linalg.pinv(symmetrize(S[bad]), hermitian=True)
     return out
@@ -119,9 +130,9 @@ def _fix_lost_precision(S: np.ndarray, det: np.ndarray, out: np.ndarray) -> np.n
 def logdet_spd(S: np.ndarray) -> np.ndarray:
     """Log-determinant of a stack of symmetric positive-definite matrices.
 
-    Closed forms for sizes 1 to 3; where a closed-form determinant comes out
-    non-positive through lost precision, LAPACK's ``slogdet`` decides (NaN
-    if the matrix is really not positive definite).
+    Closed forms for sizes 1 to 3; where a closed-form determinant cannot be
+    trusted (tiny against the product of the diagonal), LAPACK's ``slogdet``
+    decides (NaN if the matrix is really not positive definite).
     """
     m = S.shape[-1]
     if m == 1:
@@ -138,7 +149,7 @@ def logdet_spd(S: np.ndarray) -> np.ndarray:
     else:
         sign, logdet = np.linalg.slogdet(S)
         return np.where(sign > 0, logdet, np.nan)
-    bad = ~(det > 0)
+    bad = _imprecise(S, det)
     out = np.log(np.where(bad, 1.0, det))
     if np.any(bad):
         out = np.array(out)

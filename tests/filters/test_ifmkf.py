@@ -233,11 +233,12 @@ def test_post_fit_residual_meets_the_level_where_ifmkf_fades():
 
 
 def test_unreachable_minimise_keeps_sigma_point_filters_stable():
-    sc = UnderwaterTOA(condition="actual", steps=30)
-    sim = sc.simulate(run_streams(6, range(10), 0), 10)
+    sc = UnderwaterTOA(condition="actual", steps=20)
+    sim = sc.simulate(run_streams(6, range(6), 0), 6)
     for cls in (pu.UnscentedKalmanFilter, pu.CubatureKalmanFilter):
         plain = pu.run(cls(sc.motion, sc.measurement), sim.measurements, sim.prior)
-        track = pu.run(cls(sc.motion, sc.measurement, fading=pu.Improved(unreachable="minimise")), sim.measurements, sim.prior)
+        strategy = pu.Improved(unreachable="minimise", grid=40)
+        track = pu.run(cls(sc.motion, sc.measurement, fading=strategy), sim.measurements, sim.prior)
         rmse = lambda t: np.sqrt(np.mean(np.sum((t.mean[..., :2] - sim.truth[..., :2]) ** 2, axis=-1)))  # noqa: E731
         assert track.info["faded"].any()
         assert np.isfinite(rmse(track)) and rmse(track) < rmse(plain)

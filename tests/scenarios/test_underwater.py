@@ -130,3 +130,14 @@ def test_a_run_does_not_depend_on_its_batch():
 def test_bad_parameters_are_refused_naming_the_field(kwargs, message):
     with pytest.raises(ValueError, match=message):
         UnderwaterTOA(**kwargs)
+
+
+def test_travel_times_and_ranges_give_the_same_ekf_estimates():
+    # times = ranges / c and σ_t = σ_r / c: the EKF is invariant to that scaling
+    for condition in ("ideal", "abnormal"):
+        est = {}
+        for mode in ("ranges", "times"):
+            sc = UnderwaterTOA(condition=condition, mode=mode, steps=30)
+            sim = _sim(sc, 10)
+            est[mode] = pu.run(pu.ExtendedKalmanFilter(sc.motion, sc.measurement, fading=pu.Improved()), sim.measurements, sim.prior).mean
+        np.testing.assert_allclose(est["times"], est["ranges"], rtol=1e-9, atol=1e-9)
