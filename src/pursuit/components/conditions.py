@@ -244,7 +244,7 @@ class ConditionsPlan:
                 "position",
                 log=self.figure_opts["log_rmse"],
                 events=events[c.title],
-                title=f"Position RMSE, {c.title} ({r.runs} runs)",
+                title=f"Position RMSE over {r.runs} runs\n{c.title}",
             )
         if self.figure_opts["fading"]:
             figs["fading_factor"] = fading_over_time(
