@@ -5,8 +5,11 @@ from .engine.run import run
 from .filters import (
     Constant,
     CubatureKalmanFilter,
+    ExponentiallyWeighted,
     ExtendedKalmanFilter,
+    Improved,
     KalmanFilter,
+    StrongTracking,
     UnscentedKalmanFilter,
     rts_smooth,
 )
@@ -30,6 +33,9 @@ __all__ = [
     "UnscentedKalmanFilter",
     "CubatureKalmanFilter",
     "Constant",
+    "ExponentiallyWeighted",
+    "StrongTracking",
+    "Improved",
     "rts_smooth",
     "__version__",
 ]

@@ -69,7 +69,10 @@ def inv_spd(S: np.ndarray) -> np.ndarray:
     """Inverse of a stack of symmetric positive-definite matrices.
 
     Sizes 1 to 3 use closed forms (about 20x faster than LAPACK on stacks of
-    tiny matrices); larger sizes call ``np.linalg.inv``.
+    tiny matrices); larger sizes call ``np.linalg.inv``.  Cofactor formulas
+    lose accuracy when the determinant is tiny against the product of the
+    diagonal (an ill-conditioned S, e.g. a huge predicted covariance against
+    a tiny R); such matrices are inverted by an eigendecomposition instead.
     """
     m = S.shape[-1]
     if m == 1:
@@ -78,11 +81,12 @@ def inv_spd(S: np.ndarray) -> np.ndarray:
         a, b, c, d = S[..., 0, 0], S[..., 0, 1], S[..., 1, 0], S[..., 1, 1]
         det = a * d - b * c
         out = np.empty(S.shape, dtype=float)
-        out[..., 0, 0] = d / det
-        out[..., 0, 1] = -b / det
-        out[..., 1, 0] = -c / det
-        out[..., 1, 1] = a / det
-        return out
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out[..., 0, 0] = d / det
+            out[..., 0, 1] = -b / det
+            out[..., 1, 0] = -c / det
+            out[..., 1, 1] = a / det
+        return _fix_lost_precision(S, det, out)
     if m == 3:
         a = S
         c00 = a[..., 1, 1] * a[..., 2, 2] - a[..., 1, 2] * a[..., 2, 1]
@@ -90,36 +94,68 @@ def inv_spd(S: np.ndarray) -> np.ndarray:
         c02 = a[..., 1, 0] * a[..., 2, 1] - a[..., 1, 1] * a[..., 2, 0]
         det = a[..., 0, 0] * c00 + a[..., 0, 1] * c01 + a[..., 0, 2] * c02
         out = np.empty(S.shape, dtype=float)
-        out[..., 0, 0] = c00 / det
-        out[..., 1, 0] = c01 / det
-        out[..., 2, 0] = c02 / det
-        out[..., 0, 1] = (a[..., 0, 2] * a[..., 2, 1] - a[..., 0, 1] * a[..., 2, 2]) / det
-        out[..., 1, 1] = (a[..., 0, 0] * a[..., 2, 2] - a[..., 0, 2] * a[..., 2, 0]) / det
-        out[..., 2, 1] = (a[..., 0, 1] * a[..., 2, 0] - a[..., 0, 0] * a[..., 2, 1]) / det
-        out[..., 0, 2] = (a[..., 0, 1] * a[..., 1, 2] - a[..., 0, 2] * a[..., 1, 1]) / det
-        out[..., 1, 2] = (a[..., 0, 2] * a[..., 1, 0] - a[..., 0, 0] * a[..., 1, 2]) / det
-        out[..., 2, 2] = (a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]) / det
-        return out
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out[..., 0, 0] = c00 / det
+            out[..., 1, 0] = c01 / det
+            out[..., 2, 0] = c02 / det
+            out[..., 0, 1] = (a[..., 0, 2] * a[..., 2, 1] - a[..., 0, 1] * a[..., 2, 2]) / det
+            out[..., 1, 1] = (a[..., 0, 0] * a[..., 2, 2] - a[..., 0, 2] * a[..., 2, 0]) / det
+            out[..., 2, 1] = (a[..., 0, 1] * a[..., 2, 0] - a[..., 0, 0] * a[..., 2, 1]) / det
+            out[..., 0, 2] = (a[..., 0, 1] * a[..., 1, 2] - a[..., 0, 2] * a[..., 1, 1]) / det
+            out[..., 1, 2] = (a[..., 0, 2] * a[..., 1, 0] - a[..., 0, 0] * a[..., 1, 2]) / det
+            out[..., 2, 2] = (a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]) / det
+        return _fix_lost_precision(S, det, out)
     return np.linalg.inv(S)
 
 
+# The cofactor determinant of an SPD matrix has a relative error of about
+# eps * prod(diag) / det; below this ratio the closed forms hand over to LAPACK.
+_CLOSED_FORM_MIN_RATIO = 1e-6
+
+
+def _imprecise(S: np.ndarray, det: np.ndarray) -> np.ndarray:
+    """True where a closed-form determinant (or inverse) of S cannot be trusted."""
+    scale = np.prod(np.diagonal(S, axis1=-2, axis2=-1), axis=-1)
+    return ~(det > _CLOSED_FORM_MIN_RATIO * scale)
+
+
+def _fix_lost_precision(S: np.ndarray, det: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """Re-invert, by eigendecomposition, the matrices whose closed form lost precision."""
+    bad = _imprecise(S, det)
+    if np.any(bad):
+        out[bad] = np.linalg.pinv(symmetrize(S[bad]), hermitian=True)
+    return out
+
+
 def logdet_spd(S: np.ndarray) -> np.ndarray:
-    """Log-determinant of a stack of symmetric positive-definite matrices."""
+    """Log-determinant of a stack of symmetric positive-definite matrices.
+
+    Closed forms for sizes 1 to 3; where a closed-form determinant cannot be
+    trusted (tiny against the product of the diagonal), LAPACK's ``slogdet``
+    decides (NaN if the matrix is really not positive definite).
+    """
     m = S.shape[-1]
     if m == 1:
         return np.log(S[..., 0, 0])
     if m == 2:
-        return np.log(S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0])
-    if m == 3:
+        det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
+    elif m == 3:
         a = S
         det = (
             a[..., 0, 0] * (a[..., 1, 1] * a[..., 2, 2] - a[..., 1, 2] * a[..., 2, 1])
             - a[..., 0, 1] * (a[..., 1, 0] * a[..., 2, 2] - a[..., 1, 2] * a[..., 2, 0])
             + a[..., 0, 2] * (a[..., 1, 0] * a[..., 2, 1] - a[..., 1, 1] * a[..., 2, 0])
         )
-        return np.log(det)
-    sign, logdet = np.linalg.slogdet(S)
-    return np.where(sign > 0, logdet, np.nan)
+    else:
+        sign, logdet = np.linalg.slogdet(S)
+        return np.where(sign > 0, logdet, np.nan)
+    bad = _imprecise(S, det)
+    out = np.log(np.where(bad, 1.0, det))
+    if np.any(bad):
+        out = np.array(out)
+        sign, logdet = np.linalg.slogdet(S[bad])
+        out[bad] = np.where(sign > 0, logdet, np.nan)
+    return out
 
 
 def cholesky_psd(P: np.ndarray, jitter: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:

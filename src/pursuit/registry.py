@@ -27,9 +27,12 @@ _COMPONENT_MODULES = (
     "pursuit.components.models",
     "pursuit.components.scenarios",
     "pursuit.components.filters",
+    "pursuit.components.fading",
     "pursuit.components.experiments",
     "pursuit.components.maneuver",
     "pursuit.components.maneuver_experiment",
+    "pursuit.components.underwater",
+    "pursuit.components.conditions",
 )
 
 

@@ -94,6 +94,17 @@ CASES = [
         scenario=MANEUVER,
     ),
     Case("imm-cv-singer", _imm_cv_singer, exact_on_linear=False, scenario=MANEUVER),
+    # adaptive fading strategies (paper P2 and the strong tracking filter): λ can exceed 1
+    Case("kf-ewfmkf", lambda s: pu.KalmanFilter(s.motion, s.measurement, fading=pu.ExponentiallyWeighted()), exact_on_linear=False),
+    Case("ekf-ewfmkf", lambda s: pu.ExtendedKalmanFilter(s.motion, s.measurement, fading=pu.ExponentiallyWeighted(b=0.9)), exact_on_linear=False),
+    Case("ekf-stf", lambda s: pu.ExtendedKalmanFilter(s.motion, s.measurement, fading=pu.StrongTracking()), exact_on_linear=False),
+    Case("ukf-stf", lambda s: pu.UnscentedKalmanFilter(s.motion, s.measurement, fading=pu.StrongTracking(rho=0.8, beta=1.5)), exact_on_linear=False),
+    Case("kf-ifmkf", lambda s: pu.KalmanFilter(s.motion, s.measurement, fading=pu.Improved()), exact_on_linear=False),
+    Case("ekf-ifmkf", lambda s: pu.ExtendedKalmanFilter(s.motion, s.measurement, fading=pu.Improved()), exact_on_linear=False),
+    Case("ckf-ifmkf", lambda s: pu.CubatureKalmanFilter(s.motion, s.measurement, fading=pu.Improved(beta=1.0, search="minimise", grid=24)), exact_on_linear=False),
+    Case("ukf-ifmkf-instant", lambda s: pu.UnscentedKalmanFilter(s.motion, s.measurement, fading=pu.Improved(beta=1.0, test="instant", search="stf")), exact_on_linear=False),
 ]
 
-NONLINEAR_CASES = [c for c in CASES if c.id != "kf" and c.scenario is None]
+# Cases run on the nonlinear scenario too, except those that need linear models (the plain KF) or a
+# scenario of their own.
+NONLINEAR_CASES = [c for c in CASES if c.id != "kf" and not c.id.startswith("kf-") and c.scenario is None]

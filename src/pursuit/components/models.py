@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 from ..models import measurement, motion
+from ..models.linear_motion import LinearMotion
+from ..models.toa import PositionFix
 from ..registry import register
 
 _MODELS = {
@@ -12,6 +14,8 @@ _MODELS = {
     "range": ("Ranges to fixed anchors", measurement.RangeSensors),
     "range-bearing": ("Range and bearing from one 2-D sensor", measurement.RangeBearing),
     "toa": ("Times of arrival (range / c) at fixed anchors", measurement.TimeOfArrival),
+    "linear-motion": ("Linear motion x_k = F x_(k-1) + w, w ~ N(0, Q), from given F and Q", LinearMotion),
+    "position-fix": ("Position fix z = p + v with step-dependent R (closed-form TOA positioning)", PositionFix),
 }
 
 for _name, (_summary, _cls) in _MODELS.items():

@@ -2,6 +2,7 @@
 
 from .cs import AdaptiveCSFilter, CurrentStatisticalFilter, ModifiedSingerFilter
 from .fading import Constant, Fade, FadingContext, FadingStrategy, NoFading
+from .fading_adaptive import ExponentiallyWeighted, StrongTracking
 from .gaussian import (
     CubatureKalmanFilter,
     ExtendedKalmanFilter,
@@ -10,6 +11,7 @@ from .gaussian import (
     UnscentedKalmanFilter,
 )
 from .imm import InteractingMultipleModel, StateMap, kinematic_map
+from .ifmkf import Improved
 from .smoother import SmoothedTrack, rts_smooth
 
 __all__ = [
@@ -26,6 +28,9 @@ __all__ = [
     "kinematic_map",
     "Constant",
     "NoFading",
+    "ExponentiallyWeighted",
+    "StrongTracking",
+    "Improved",
     "Fade",
     "FadingContext",
     "FadingStrategy",

@@ -18,6 +18,11 @@ A strategy is any object with
   none);
 * ``factor(memory, ctx) -> (Fade, memory)``: λ for this step, from a
   :class:`FadingContext`.
+
+The strategies of paper P2 and the strong tracking filter live beside this
+module: :class:`~pursuit.filters.fading_adaptive.ExponentiallyWeighted`
+(EWFMKF), :class:`~pursuit.filters.fading_adaptive.StrongTracking` (STF) and
+:class:`~pursuit.filters.ifmkf.Improved` (IFMKF).
 """
 
 from __future__ import annotations
@@ -56,8 +61,14 @@ class Fade:
 class FadingContext:
     """What a fading strategy may look at when it chooses λ_k.
 
-    Parameters are filled in by the filter.  ``innovation`` and ``jacobian``
-    are computed on first use only, so a constant strategy costs nothing.
+    Parameters are filled in by the filter.  ``innovation``, ``jacobian``
+    and ``linearization`` are computed on first use only, so a constant
+    strategy costs nothing.
+
+    ``linearize`` (optional) returns the filter's own linearisation of the
+    measurement function at the prediction; sigma-point filters give their
+    statistical linearisation.  Without it, ``linearization`` is the
+    Jacobian.
     """
 
     def __init__(
@@ -70,6 +81,7 @@ class FadingContext:
         z: np.ndarray,
         measurement: Any,
         trial_update: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+        linearize: Callable[[], np.ndarray] | None = None,
     ) -> None:
         self.k = k
         self.pred_mean = pred_mean
@@ -78,6 +90,17 @@ class FadingContext:
         self.z = z
         self.measurement = measurement
         self._trial_update = trial_update
+        self._linearize = linearize
+
+    @cached_property
+    def measured(self) -> np.ndarray:
+        """``(*batch, m)`` boolean: True where the measurement component is present."""
+        return ~np.isnan(self.z)
+
+    @cached_property
+    def measurement_cov(self) -> np.ndarray:
+        """R_k, ``(m, m)``."""
+        return np.asarray(self.measurement.cov(self.k), dtype=float)
 
     @cached_property
     def predicted_measurement(self) -> np.ndarray:
@@ -97,6 +120,18 @@ class FadingContext:
         from .gaussian import measurement_jacobian
 
         return measurement_jacobian(self.measurement, self.pred_mean, self.k)
+
+    @cached_property
+    def linearization(self) -> np.ndarray:
+        """The filter's H_k at the prediction: ``(m, n)`` or ``(*batch, m, n)``.
+
+        The Jacobian for the KF and EKF; for the UKF and CKF the statistical
+        linearisation ``H = P_xzᵀ (P̄ + Q)⁻¹`` from their sigma points, which
+        equals the Jacobian when h is linear.
+        """
+        if self._linearize is None:
+            return self.jacobian
+        return self._linearize()
 
     def trial_update(self, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The filter's update with ``P⁻ = lam·P̄ + Q``: returns (mean, cov)."""

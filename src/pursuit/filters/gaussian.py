@@ -25,6 +25,8 @@ filter:
     measured): the log marginal likelihood increment of the step.
 ``fading`` (*b,)
     λ_k used in the predict step.
+``faded`` (*b,)
+    True where λ_k > 1 (the filter faded its memory this step).
 ``repaired`` (*b,)
     True where a covariance had to be repaired to stay positive definite.
 ``pred_mean``, ``pred_cov``, ``cross_cov``
@@ -225,6 +227,7 @@ class _GaussianFilter:
             z=z,
             measurement=self.measurement,
             trial_update=lambda lam: self._trial(pred, lam, z, k),
+            linearize=lambda: self._linearize(pred, k),
         )
         fade, memory = self.fading.factor(state.memory, ctx)
         lam = np.asarray(fade.lam, dtype=float)
@@ -239,6 +242,7 @@ class _GaussianFilter:
         if cov.ndim == 2 and batch:
             cov = np.broadcast_to(cov, (*batch, *cov.shape))
         info["fading"] = np.broadcast_to(lam, batch)
+        info["faded"] = np.broadcast_to(lam > 1.0, batch)
         info["repaired"] = _any_repaired(batch, pred.repaired, meas.repaired)
         info["pred_mean"] = pred.mean
         info["pred_cov"] = P_pred
@@ -259,6 +263,10 @@ class _GaussianFilter:
         meas = self._measure(pred.mean, P_pred, k)
         mean, cov, _ = _update(pred.mean, P_pred, z, ~np.isnan(z), meas, self.measurement, k)
         return mean, cov
+
+    def _linearize(self, pred: _Prediction, k: int) -> np.ndarray:
+        """H_k for fading strategies: the measurement Jacobian at the prediction."""
+        return measurement_jacobian(self.measurement, pred.mean, k)
 
 
 def _scale(lam: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -478,6 +486,14 @@ class _SigmaPointFilter(_GaussianFilter):
         Pzz = _t(dZ * wc[:, None]) @ dZ
         Pxz = _t(dX * wc[:, None]) @ dZ
         return _Measured(zp, Pzz, Pxz, None, repaired)
+
+    def _linearize(self, pred, k):
+        # Statistical linearisation about the unfaded prediction P̄ + Q:
+        # H = Pxzᵀ P⁻¹ (exact for linear h).
+        P_pred = pred.propagated + pred.Q
+        Pxz = self._measure(pred.mean, P_pred, k).Pxz
+        P_stack = np.broadcast_to(P_pred, (*Pxz.shape[:-2], *P_pred.shape[-2:]))
+        return _t(np.linalg.solve(P_stack, Pxz))
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,9 @@
 
 from .measurement import LinearGaussian, RangeBearing, RangeSensors, TimeOfArrival, gaussian_loglik, wrap_angle
 from .maneuver import ConstantTurn, CoordinatedTurn, CurrentStatistical, Jerk, Singer
+from .linear_motion import LinearMotion
 from .motion import ConstantAcceleration, ConstantVelocity
+from .toa import PositionFix, l_array, toa_position, trilaterate, trilateration_jacobian
 
 __all__ = [
     "ConstantVelocity",
@@ -12,6 +14,12 @@ __all__ = [
     "Jerk",
     "ConstantTurn",
     "CoordinatedTurn",
+    "LinearMotion",
+    "PositionFix",
+    "l_array",
+    "toa_position",
+    "trilaterate",
+    "trilateration_jacobian",
     "LinearGaussian",
     "RangeSensors",
     "RangeBearing",

@@ -9,7 +9,7 @@ from matplotlib.figure import Figure
 
 from ..results import MonteCarloResult
 
-__all__ = ["rmse_over_time", "trajectory", "UNITS"]
+__all__ = ["rmse_over_time", "trajectory", "fading_over_time", "mark_events", "UNITS"]
 
 UNITS = {"position": "m", "velocity": "m/s", "acceleration": "m/s²"}
 
@@ -28,6 +28,7 @@ def rmse_over_time(
     unit: str | None = None,
     filters: Sequence[str] | None = None,
     title: str | None = None,
+    events: Sequence[tuple[float, str]] = (),
 ) -> Figure:
     """RMSE against time for each filter.
 
@@ -45,6 +46,9 @@ def rmse_over_time(
         Subset and order of filters (default all).
     title
         Figure title (default derived from the component).
+    events
+        ``(time, label)`` pairs drawn as labelled vertical lines (e.g. an
+        outlier).
     """
     fig, ax = _new()
     names = list(filters) if filters is not None else result.filter_names
@@ -57,9 +61,18 @@ def rmse_over_time(
     ax.set_xlabel("time (s)")
     ax.set_ylabel(f"{label} RMSE ({u})" if u else f"{label} RMSE")
     ax.set_title(title or f"{label.capitalize()} RMSE over {result.runs} runs")
+    mark_events(ax, events)
     ax.grid(True, alpha=0.3)
     ax.legend()
     return fig
+
+
+def mark_events(ax, events: Sequence[tuple[float, str]]) -> None:
+    """Draw each ``(time, label)`` as a dashed vertical line labelled at the top of the axes."""
+    for t, text in events:
+        ax.axvline(t, color="0.35", linestyle="--", linewidth=1.0, zorder=0)
+        ax.annotate(text, (t, 1.0), xycoords=("data", "axes fraction"), xytext=(3, -12),
+                    textcoords="offset points", fontsize=8, color="0.25")
 
 
 def trajectory(
@@ -104,4 +117,57 @@ def trajectory(
     ax.set_title(title or f"Truth and estimates, run {run}")
     ax.grid(True, alpha=0.3)
     ax.legend()
+    return fig
+
+
+def fading_over_time(
+    results: dict[str, MonteCarloResult],
+    *,
+    filters: Sequence[str] | None = None,
+    statistic: str = "mean",
+    log: bool = True,
+    events: dict[str, Sequence[tuple[float, str]]] | None = None,
+    title: str | None = None,
+) -> Figure:
+    """The fading factor λ_k against time, one panel per result (e.g. per condition).
+
+    Parameters
+    ----------
+    results
+        ``{panel title: result}``; each filter's step info must hold
+        ``fading`` (every Gaussian filter records it).
+    filters
+        Subset and order of filters (default: those that recorded λ).
+    statistic
+        ``"mean"`` or ``"median"`` of λ over the runs at each step.
+    log
+        Logarithmic λ axis.
+    events
+        Optional ``{panel title: [(time, label), ...]}`` to mark.
+    title
+        Figure title.
+    """
+    if statistic not in ("mean", "median"):
+        raise ValueError(f"statistic: must be 'mean' or 'median', got {statistic!r}")
+    reduce = np.mean if statistic == "mean" else np.median
+    panels = list(results.items())
+    fig = Figure(figsize=(6.4, 2.6 * max(len(panels), 1) + 0.6), layout="constrained")
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, (panel, result) in zip(axes, panels):
+        names = list(filters) if filters is not None else result.filter_names
+        for name in names:
+            info = result.filters[name].info
+            if "fading" not in info:
+                continue
+            ax.plot(result.times, reduce(info["fading"], axis=1), label=name, linewidth=1.3)
+        if log:
+            ax.set_yscale("log")
+        ax.set_ylabel(f"{statistic} λ")
+        ax.set_title(panel, fontsize=10)
+        mark_events(ax, (events or {}).get(panel, ()))
+        ax.grid(True, alpha=0.3)
+    axes[-1].set_xlabel("time (s)")
+    axes[0].legend(fontsize=8, ncol=3)
+    if title:
+        fig.suptitle(title)
     return fig

@@ -3,6 +3,7 @@
 from .base import Simulation, simulate_markov
 from .linear import LinearCV
 from .maneuver import Maneuver, ManeuveringTarget
+from .underwater import UnderwaterTOA
 from .wsn import WSNRange
 
-__all__ = ["Simulation", "simulate_markov", "WSNRange", "LinearCV", "ManeuveringTarget", "Maneuver"]
+__all__ = ["Simulation", "simulate_markov", "WSNRange", "LinearCV", "ManeuveringTarget", "Maneuver", "UnderwaterTOA"]
