@@ -11,8 +11,13 @@ from typing import Any, Sequence
 import numpy as np
 
 from . import metrics
+from .reduction import FilterStatistics, component_groups, filter_statistics, group_key, merge_statistics, run_sum
 
-__all__ = ["FilterResult", "MonteCarloResult"]
+__all__ = ["FilterResult", "MonteCarloResult", "STORE_MODES"]
+
+STORE_MODES = ("full", "summary")
+"""``full``: every run's arrays are kept; ``summary``: each chunk is reduced to
+:class:`pursuit.reduction.FilterStatistics` and dropped, keeping a few example runs."""
 
 Component = str | Sequence[int]
 
@@ -26,18 +31,18 @@ class FilterResult:
     name
         The filter's label.
     estimates
-        ``(K, M, n)`` filtered means.
+        ``(K, M, n)`` filtered means (``None`` for a summary-mode result).
     covariances
         ``(K, M, n, n)`` filtered covariances, or ``None`` if not kept.
     info
         Step info ``{key: (K, M, ...)}`` (NIS, log-likelihood, fading
-        factor, ESS, ...).
+        factor, ESS, ...); empty for a summary-mode result.
     wall_time
         Seconds spent filtering, summed over chunks.
     """
 
     name: str
-    estimates: np.ndarray
+    estimates: np.ndarray | None
     covariances: np.ndarray | None
     info: dict[str, np.ndarray] = field(default_factory=dict)
     wall_time: float = 0.0
@@ -49,40 +54,105 @@ class MonteCarloResult:
 
     Run i of every filter saw the same truth and measurements (common random
     numbers), drawn from the seed of run i under the root ``seed``.
+
+    Two storage modes (``store``):
+
+    * ``"full"``: ``truth``, ``measurements`` and each filter's estimates,
+      covariances and info hold every run;
+    * ``"summary"``: each chunk of runs was reduced to the statistics the
+      summaries need (``statistics``) and then dropped, so memory does not
+      grow with the number of runs.  ``truth``, ``measurements`` and the
+      filters' arrays are ``None``; the first few runs are kept whole in
+      ``examples`` (a full-mode result) for trajectory figures and the
+      tidy error table.
+
+    The summaries (RMSE per step, pooled and per run, ANEES, ANIS, their χ²
+    bounds, step-info means) are computed from the same reduced statistics in
+    both modes, with sums over runs in a fixed order (:mod:`pursuit.reduction`),
+    so they are bit-identical whatever the mode, chunk size or workers.
     """
 
     scenario: str
     seed: int
     times: np.ndarray
-    truth: np.ndarray
-    measurements: np.ndarray
+    truth: np.ndarray | None
+    measurements: np.ndarray | None
     state_labels: tuple[str, ...]
     position_indices: tuple[int, ...]
     velocity_indices: tuple[int, ...]
     filters: dict[str, FilterResult]
     config: dict[str, Any] | None = None
+    statistics: dict[str, FilterStatistics] | None = None
+    total_runs: int | None = None
+    examples: "MonteCarloResult | None" = None
+    state_units: tuple[str, ...] | None = None
+
+    def __post_init__(self) -> None:
+        if self.truth is None and (self.statistics is None or self.total_runs is None):
+            raise ValueError("a summary-mode result needs statistics and total_runs")
 
     # -- shape --------------------------------------------------------------
     @property
+    def store(self) -> str:
+        """``"full"`` or ``"summary"`` (see the class docstring)."""
+        return "full" if self.truth is not None else "summary"
+
+    @property
     def runs(self) -> int:
         """Number of Monte Carlo runs M."""
+        if self.total_runs is not None:
+            return int(self.total_runs)
         return self.truth.shape[1]
 
     @property
     def steps(self) -> int:
         """Number of time steps K."""
-        return self.truth.shape[0]
+        return len(self.times)
+
+    @property
+    def state_dim(self) -> int:
+        """State dimension n."""
+        return len(self.state_labels)
 
     @property
     def filter_names(self) -> list[str]:
         """Filter labels in the order they were run."""
         return list(self.filters)
 
+    def stored(self) -> "MonteCarloResult":
+        """The full-mode result of the runs whose arrays are kept.
+
+        Itself in full mode; the example runs ``0 .. R-1`` in summary mode.
+        """
+        if self.truth is not None:
+            return self
+        if self.examples is None:
+            raise ValueError("this summary-mode result kept no example runs")
+        return self.examples
+
+    def unit(self, index: int) -> str:
+        """Unit of state component ``index`` (from the scenario, else m for positions and m/s for velocities)."""
+        if self.state_units is not None:
+            return self.state_units[index]
+        if index in self.position_indices:
+            return "m"
+        if index in self.velocity_indices:
+            return "m/s"
+        return ""
+
     def _filter(self, name: str) -> FilterResult:
         try:
             return self.filters[name]
         except KeyError:
             raise KeyError(f"no filter named {name!r}; have {', '.join(self.filters)}") from None
+
+    def _full(self, what: str) -> None:
+        if self.truth is None:
+            raise ValueError(
+                f"{what} needs every run's arrays, but this result was stored as a summary "
+                f"(store='summary'); use the per-step summaries (rmse_per_step, anees, anis) "
+                f"or run with store='full'"
+            )
 
     def indices(self, component: Component) -> tuple[int, ...]:
         """State indices of ``"position"``, ``"velocity"``, ``"state"``, a label, or explicit indices."""
@@ -92,49 +162,108 @@ class MonteCarloResult:
             if component == "velocity":
                 return tuple(self.velocity_indices)
             if component == "state":
-                return tuple(range(self.truth.shape[-1]))
+                return tuple(range(self.state_dim))
             if component in self.state_labels:
                 return (self.state_labels.index(component),)
             raise KeyError(f"unknown component {component!r}; use position, velocity, state or one of {self.state_labels}")
         return tuple(int(i) for i in component)
 
+    # -- reduced statistics -------------------------------------------------
+    def groups(self) -> list[tuple[int, ...]]:
+        """The index groups whose errors are reduced (see :func:`pursuit.reduction.component_groups`)."""
+        return component_groups(self.state_dim, self.position_indices, self.velocity_indices)
+
+    def filter_statistics(self, name: str) -> FilterStatistics:
+        """One filter's reduced statistics (computed from the arrays once, in full mode)."""
+        self._filter(name)
+        if self.statistics is None:
+            self.statistics = {}
+        stats = self.statistics.get(name)
+        if stats is None:
+            fr = self.filters[name]
+            part = filter_statistics(self.truth, fr.estimates, fr.covariances, fr.info, 0, self.groups())
+            stats = self.statistics[name] = merge_statistics([part], self.runs, self.steps)
+        return stats
+
+    def _sse(self, name: str, component: Component) -> tuple[np.ndarray, np.ndarray]:
+        """Per-step summed squared error over runs ``(K,)`` and per-run mean squared error ``(M,)``."""
+        idx = self.indices(component)
+        key = group_key(idx)
+        stats = self.filter_statistics(name)
+        if f"sse:{key}" in stats.sums:
+            return stats.sums[f"sse:{key}"], stats.per_run[f"mse:{key}"]
+        self._full(f"the error of components {idx}")
+        fr = self.filters[name]
+        part = filter_statistics(self.truth, fr.estimates, None, {}, 0, [idx])
+        full = merge_statistics([part], self.runs, self.steps)
+        return full.sums[f"sse:{key}"], full.per_run[f"mse:{key}"]
+
     # -- errors -------------------------------------------------------------
     def squared_error(self, name: str, component: Component = "position") -> np.ndarray:
-        """``(K, M)`` squared error summed over the component's indices."""
+        """``(K, M)`` squared error summed over the component's indices (full mode only)."""
+        self._full("squared_error")
         idx = self.indices(component)
         return metrics.squared_error(self._filter(name).estimates, self.truth, idx)
 
     def rmse_per_step(self, name: str, component: Component = "position") -> np.ndarray:
         """``(K,)`` RMSE over runs at each step."""
-        return metrics.rmse_per_step(self.squared_error(name, component))
+        sse, _ = self._sse(name, component)
+        return np.sqrt(sse / self.runs)
+
+    def rmse_per_run(self, name: str, component: Component = "position") -> np.ndarray:
+        """``(M,)`` each run's RMSE over time."""
+        _, mse = self._sse(name, component)
+        return np.sqrt(mse)
 
     def rmse(self, name: str, component: Component = "position", average: str = "pooled") -> float:
         """Overall RMSE: ``"pooled"`` over runs and steps, or ``"per-run"`` (mean of per-run RMSEs)."""
-        sq = self.squared_error(name, component)
         if average == "pooled":
-            return metrics.rmse_pooled(sq)
+            sse, _ = self._sse(name, component)
+            return float(np.sqrt(run_sum(sse) / (self.runs * self.steps)))
         if average == "per-run":
-            return float(np.mean(metrics.rmse_per_run(sq)))
+            return float(run_sum(self.rmse_per_run(name, component)) / self.runs)
         raise ValueError(f"average: must be 'pooled' or 'per-run', got {average!r}")
 
     # -- consistency ----------------------------------------------------------
     def nees(self, name: str) -> np.ndarray:
-        """``(K, M)`` NEES of the full state (needs covariances)."""
+        """``(K, M)`` NEES of the full state (needs covariances; full mode only)."""
+        self._full("nees")
         fr = self._filter(name)
         if fr.covariances is None:
             raise ValueError(f"{name}: covariances were not kept; NEES needs them")
         return metrics.nees(fr.estimates, fr.covariances, self.truth)
 
+    def _average(self, name: str, what: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per-step average of NEES or NIS over the runs where it is finite, mean dof, count."""
+        stats = self.filter_statistics(name)
+        if what not in stats.sums:
+            if what == "nees":
+                raise ValueError(f"{name}: covariances were not kept; NEES needs them")
+            raise ValueError(f"{name}: the filter reported no NIS")
+        count = stats.sums[f"{what}_count"]
+        safe = np.maximum(count, 1.0)
+        avg = np.where(count > 0, stats.sums[what] / safe, np.nan)
+        return avg, stats.sums[f"{what}_dof"] / safe, count
+
     def anees(self, name: str) -> np.ndarray:
         """``(K,)`` average NEES over runs."""
-        return metrics.average_consistency(self.nees(name), self.truth.shape[-1])[0]
+        return self._average(name, "nees")[0]
 
     def anis(self, name: str) -> np.ndarray:
         """``(K,)`` average NIS over runs (steps with no measurement left out)."""
-        info = self._filter(name).info
-        if "nis" not in info:
-            raise ValueError(f"{name}: the filter reported no NIS")
-        return metrics.average_consistency(info["nis"], info.get("dof", 1))[0]
+        return self._average(name, "nis")[0]
+
+    def info_keys(self, name: str) -> list[str]:
+        """Scalar step-info keys whose per-step means are available (e.g. ``fading``, ``ess``)."""
+        stats = self.filter_statistics(name)
+        return [k[5:] for k in stats.sums if k.startswith("info:") and f"{k}_count" in stats.sums]
+
+    def info_mean(self, name: str, key: str) -> np.ndarray:
+        """``(K,)`` mean over runs of a scalar step-info value (where finite)."""
+        stats = self.filter_statistics(name)
+        total = stats.require(f"info:{key}")
+        count = stats.sums[f"info:{key}_count"]
+        return np.where(count > 0, total / np.maximum(count, 1.0), np.nan)
 
     def consistency(self, name: str, level: float = 0.95) -> dict[str, float]:
         """ANEES and ANIS over all runs and steps, with the share of steps inside the χ² bounds.
@@ -145,25 +274,25 @@ class MonteCarloResult:
         model.
         """
         out: dict[str, float] = {}
-        fr = self._filter(name)
-        if fr.covariances is not None:
-            out.update(self._consistency_of("anees", self.nees(name), self.truth.shape[-1], level))
-        if "nis" in fr.info:
-            out.update(self._consistency_of("anis", fr.info["nis"], fr.info.get("dof", 1), level))
+        stats = self.filter_statistics(name)
+        for what, prefix in (("nees", "anees"), ("nis", "anis")):
+            if what in stats.sums:
+                out.update(self._consistency_of(prefix, stats, what, level))
         return out
 
     @staticmethod
-    def _consistency_of(prefix: str, values: np.ndarray, dof, level: float) -> dict[str, float]:
-        avg, dof_k, count = metrics.average_consistency(values, dof)
+    def _consistency_of(prefix: str, stats: FilterStatistics, what: str, level: float) -> dict[str, float]:
+        total, count, dof = stats.sums[what], stats.sums[f"{what}_count"], stats.sums[f"{what}_dof"]
         ok = count > 0
-        lo, hi = metrics.chi2_bounds(dof_k[ok], count[ok], level)
-        inside = float(np.mean((avg[ok] >= lo) & (avg[ok] <= hi))) if ok.any() else float("nan")
-        v = np.asarray(values, dtype=float)
-        finite = np.isfinite(v)
-        n_all = int(finite.sum())
-        d_all = float(np.mean(np.broadcast_to(np.asarray(dof, dtype=float), v.shape)[finite])) if n_all else np.nan
-        overall = float(np.mean(v[finite])) if n_all else float("nan")
-        lo_all, hi_all = metrics.chi2_bounds(d_all, n_all, level) if n_all else (np.nan, np.nan)
+        avg = total[ok] / count[ok]
+        lo, hi = metrics.chi2_bounds(dof[ok] / count[ok], count[ok], level)
+        inside = float(np.mean((avg >= lo) & (avg <= hi))) if ok.any() else float("nan")
+        n_all = float(run_sum(count))
+        if n_all:
+            overall = float(run_sum(total) / n_all)
+            lo_all, hi_all = metrics.chi2_bounds(float(run_sum(dof)) / n_all, n_all, level)
+        else:
+            overall, lo_all, hi_all = (float("nan"),) * 3
         return {
             prefix: overall,
             f"{prefix}_low": float(lo_all),

@@ -6,6 +6,14 @@ and the filters' own (particle filters' draws, also identical for every
 filter).  Runs are processed in chunks to bound memory; because each run
 draws only from its own streams and every batched operation in pursuit is
 batch-invariant, the results are bit-identical whatever the chunk size.
+
+Chunks are computed by a backend (:mod:`pursuit.engine.backends`): in this
+process, in local worker processes or on a Dask cluster.  In ``summary``
+storage mode each chunk is reduced where it was computed
+(:mod:`pursuit.reduction`) and only the reduction travels back, so memory is
+bounded by the chunk size, not by the number of runs; sums over runs are
+taken in a fixed order, so the summaries are again bit-identical whatever the
+chunking, and equal to those computed from the full arrays.
 """
 
 from __future__ import annotations
@@ -17,14 +25,30 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from .._validation import positive_int
-from ..results import FilterResult, MonteCarloResult
+from ..reduction import PartialStatistics, component_groups, filter_statistics, merge_statistics
+from ..results import STORE_MODES, FilterResult, MonteCarloResult
 from ..rng import run_streams
+from .backends import Serial, current_options, make_backend
 from .progress import Progress
 from .run import run
 
-__all__ = ["monte_carlo", "run_chunk", "ChunkResult", "DEFAULT_CHUNK"]
+__all__ = [
+    "monte_carlo",
+    "run_chunk",
+    "ChunkResult",
+    "ChunkSummary",
+    "ChunkTask",
+    "combine_chunks",
+    "combine_summaries",
+    "DEFAULT_CHUNK",
+    "DEFAULT_KEEP_RUNS",
+    "AUTO_FULL_LIMIT",
+]
 
 DEFAULT_CHUNK = 1000
+DEFAULT_KEEP_RUNS = 10
+AUTO_FULL_LIMIT = 1 << 30
+"""``store="auto"`` keeps every run's arrays while they are estimated to take at most this many bytes."""
 SCENARIO_STREAM = 0
 FILTER_STREAM = 1
 
@@ -75,11 +99,105 @@ def _chunks(runs: int, chunk_size: int) -> list[tuple[int, int]]:
     return [(s, min(s + chunk_size, runs)) for s in range(0, runs, chunk_size)]
 
 
+@dataclass
+class ChunkSummary:
+    """Runs ``start`` to ``stop − 1`` reduced: per-filter statistics, wall times, example runs."""
+
+    start: int
+    stop: int
+    times: np.ndarray
+    stats: dict[str, PartialStatistics]
+    wall_times: dict[str, float]
+    example: ChunkResult | None
+
+
+def summarise_chunk(chunk: ChunkResult, groups: Sequence[Sequence[int]], keep_runs: int) -> ChunkSummary:
+    """Reduce a chunk to what the summaries need, keeping runs below ``keep_runs`` whole."""
+    stats = {
+        name: filter_statistics(chunk.truth, fr.estimates, fr.covariances, fr.info, chunk.start, groups)
+        for name, fr in chunk.tracks.items()
+    }
+    example = None
+    if chunk.start < keep_runs:
+        r = min(chunk.stop, keep_runs) - chunk.start
+        tracks = {
+            name: FilterResult(
+                name,
+                fr.estimates[:, :r].copy(),
+                None if fr.covariances is None else fr.covariances[:, :r].copy(),
+                {k: v[:, :r].copy() for k, v in fr.info.items()},
+                fr.wall_time,
+            )
+            for name, fr in chunk.tracks.items()
+        }
+        example = ChunkResult(
+            chunk.start, chunk.start + r, chunk.times, chunk.truth[:, :r].copy(), chunk.measurements[:, :r].copy(), tracks
+        )
+    walls = {name: fr.wall_time for name, fr in chunk.tracks.items()}
+    return ChunkSummary(chunk.start, chunk.stop, chunk.times, stats, walls, example)
+
+
+@dataclass(frozen=True)
+class ChunkTask:
+    """The work for one chunk, picklable so that any backend can ship it.
+
+    ``task(start, stop)`` runs :func:`run_chunk` and, in summary mode, reduces
+    the chunk where it was computed.
+    """
+
+    scenario: Any
+    filters: tuple[Any, ...]
+    seed: int
+    keep_cov: bool = True
+    keep_info: tuple[str, ...] | None = None
+    store: str = "full"
+    keep_runs: int = DEFAULT_KEEP_RUNS
+
+    def __call__(self, start: int, stop: int, on_filter_done: Callable[[], None] | None = None):
+        chunk = run_chunk(
+            self.scenario,
+            self.filters,
+            self.seed,
+            start,
+            stop,
+            keep_cov=self.keep_cov,
+            keep_info=self.keep_info,
+            on_filter_done=on_filter_done,
+        )
+        if self.store == "full":
+            return chunk
+        s = self.scenario
+        groups = component_groups(len(s.state_labels), s.position_indices, s.velocity_indices)
+        return summarise_chunk(chunk, groups, self.keep_runs)
+
+
+def _check_tiling(spans: Sequence[tuple[int, int]], runs: int) -> None:
+    pos = 0
+    for s, e in sorted(spans):
+        if s != pos:
+            raise RuntimeError(f"runs {min(s, pos)}..{max(s, pos) - 1} were {'computed twice' if s < pos else 'lost'}")
+        pos = e
+    if pos != runs:
+        raise RuntimeError(f"runs {pos}..{runs - 1} were lost")
+
+
+def _result_fields(scenario: Any) -> dict[str, Any]:
+    units = getattr(scenario, "state_units", None)
+    return dict(
+        scenario=getattr(scenario, "name", type(scenario).__name__),
+        state_labels=tuple(scenario.state_labels),
+        position_indices=tuple(scenario.position_indices),
+        velocity_indices=tuple(scenario.velocity_indices),
+        state_units=None if units is None else tuple(units),
+    )
+
+
 def combine_chunks(
     chunks: Sequence[ChunkResult], scenario: Any, filters: Sequence[Any], seed: int, config: dict | None
 ) -> MonteCarloResult:
     """Concatenate chunk results, in run order, into one :class:`MonteCarloResult`."""
     chunks = sorted(chunks, key=lambda c: c.start)
+    _check_tiling([(c.start, c.stop) for c in chunks], chunks[-1].stop)
     truth = np.concatenate([c.truth for c in chunks], axis=1)
     zs = np.concatenate([c.measurements for c in chunks], axis=1)
     results: dict[str, FilterResult] = {}
@@ -95,16 +213,40 @@ def combine_chunks(
             float(sum(p.wall_time for p in parts)),
         )
     return MonteCarloResult(
-        scenario=getattr(scenario, "name", type(scenario).__name__),
         seed=int(seed),
         times=chunks[0].times,
         truth=truth,
         measurements=zs,
-        state_labels=tuple(scenario.state_labels),
-        position_indices=tuple(scenario.position_indices),
-        velocity_indices=tuple(scenario.velocity_indices),
         filters=results,
         config=config,
+        **_result_fields(scenario),
+    )
+
+
+def combine_summaries(
+    parts: Sequence[ChunkSummary], scenario: Any, filters: Sequence[Any], seed: int, config: dict | None, runs: int
+) -> MonteCarloResult:
+    """Merge reduced chunks into one summary-mode :class:`MonteCarloResult`."""
+    parts = sorted(parts, key=lambda p: p.start)
+    _check_tiling([(p.start, p.stop) for p in parts], runs)
+    steps = len(parts[0].times)
+    stats = {f.name: merge_statistics([p.stats[f.name] for p in parts], runs, steps) for f in filters}
+    results = {
+        f.name: FilterResult(f.name, None, None, {}, float(sum(p.wall_times[f.name] for p in parts))) for f in filters
+    }
+    examples = [p.example for p in parts if p.example is not None]
+    ex = combine_chunks(examples, scenario, filters, seed, None) if examples else None
+    return MonteCarloResult(
+        seed=int(seed),
+        times=parts[0].times,
+        truth=None,
+        measurements=None,
+        filters=results,
+        config=config,
+        statistics=stats,
+        total_runs=runs,
+        examples=ex,
+        **_result_fields(scenario),
     )
 
 
@@ -123,6 +265,23 @@ def validate_filters(filters: Sequence[Any]) -> list[Any]:
     return filters
 
 
+def _estimated_bytes(scenario: Any, filters: Sequence[Any], runs: int, keep_cov: bool) -> int:
+    """Rough size of the full-mode arrays: truth, measurements, estimates, covariances, info."""
+    n = len(scenario.state_labels)
+    steps = int(getattr(scenario, "steps", 100))
+    per_filter = n + (n * n if keep_cov else 0) + 4
+    return 8 * steps * runs * (2 * n + len(filters) * per_filter)
+
+
+def resolve_store(store: str, scenario: Any, filters: Sequence[Any], runs: int, keep_cov: bool) -> str:
+    """``"full"`` or ``"summary"`` for a requested mode (``"auto"``: full unless it would exceed :data:`AUTO_FULL_LIMIT`)."""
+    if store == "auto":
+        return "full" if _estimated_bytes(scenario, filters, runs, keep_cov) <= AUTO_FULL_LIMIT else "summary"
+    if store not in STORE_MODES:
+        raise ValueError(f"store: must be 'auto', 'full' or 'summary', got {store!r}")
+    return store
+
+
 def monte_carlo(
     scenario: Any,
     filters: Sequence[Any],
@@ -132,8 +291,11 @@ def monte_carlo(
     chunk_size: int | None = None,
     keep_cov: bool = True,
     keep_info: Iterable[str] | None = None,
-    progress: bool = False,
+    progress: bool | Callable[[int, int], None] = False,
     config: dict | None = None,
+    backend: Any = None,
+    store: str | None = None,
+    keep_runs: int | None = None,
 ) -> MonteCarloResult:
     """Compare filters on ``runs`` Monte Carlo runs of a scenario.
 
@@ -155,9 +317,24 @@ def monte_carlo(
     keep_info
         Step-info keys to keep (default all).
     progress
-        Show a progress bar on standard error (only when it is a terminal).
+        True: show a progress bar on standard error (only when it is a
+        terminal).  A callable is called as ``progress(done, total)`` each
+        time work finishes (units: filters x chunks).
     config
         The configuration to store with the result.
+    backend
+        Where to compute the chunks: None (the :func:`~pursuit.engine.backends.engine_options`
+        in force, else this process), a number of local worker processes, a
+        Dask scheduler address ``"tcp://HOST:PORT"``, or a backend object
+        from :mod:`pursuit.engine.backends` (not closed here).
+    store
+        ``"full"`` keeps every run's arrays; ``"summary"`` reduces each
+        chunk and keeps only ``keep_runs`` example runs whole (memory bounded
+        by the chunk size); ``"auto"`` (default) is full unless the arrays
+        would take more than :data:`AUTO_FULL_LIMIT` bytes.  The summaries are
+        bit-identical in both modes.
+    keep_runs
+        Runs ``0 .. keep_runs-1`` kept whole in summary mode (default 10).
 
     Returns
     -------
@@ -168,13 +345,51 @@ def monte_carlo(
         raise ValueError(f"seed: must be a non-negative integer, got {seed!r}")
     filters = validate_filters(filters)
     chunk_size = positive_int("chunk_size", DEFAULT_CHUNK if chunk_size is None else chunk_size)
+    opts = current_options()
+    store = resolve_store(store or opts.store or "auto", scenario, filters, runs, keep_cov)
+    keep_runs = opts.keep_runs if keep_runs is None else keep_runs
+    keep_runs = DEFAULT_KEEP_RUNS if keep_runs is None else keep_runs
+    if isinstance(keep_runs, bool) or not isinstance(keep_runs, (int, np.integer)) or keep_runs < 0:
+        raise ValueError(f"keep_runs: must be a non-negative integer, got {keep_runs!r}")
+    owned = None
+    if backend is None:
+        backend = opts.backend if opts.backend is not None else Serial()
+    elif isinstance(backend, bool):
+        raise ValueError(f"backend: expected a worker count, an address or a backend, got {backend!r}")
+    elif isinstance(backend, (int, np.integer)):
+        backend = owned = make_backend(workers=int(backend))
+    elif isinstance(backend, str):
+        backend = owned = make_backend(scheduler=backend)
+
+    task = ChunkTask(
+        scenario,
+        tuple(filters),
+        int(seed),
+        keep_cov=keep_cov,
+        keep_info=None if keep_info is None else tuple(keep_info),
+        store=store,
+        keep_runs=int(keep_runs),
+    )
     spans = _chunks(runs, chunk_size)
-    bar = Progress(total=len(spans) * len(filters), label=getattr(scenario, "name", "runs"), enabled=progress)
+    bar = Progress(total=len(spans) * len(filters), label=getattr(scenario, "name", "runs"), enabled=progress is True)
+
+    def advance(n: int) -> None:
+        bar.advance(n)
+        if callable(progress):
+            progress(bar.done, bar.total)
+
     try:
-        chunks = [
-            run_chunk(scenario, filters, int(seed), s, e, keep_cov=keep_cov, keep_info=keep_info, on_filter_done=bar.advance)
-            for s, e in spans
-        ]
+        if isinstance(backend, Serial):
+            parts = backend.map_chunks(task, spans, None, on_filter_done=lambda: advance(1))
+        else:
+            parts = backend.map_chunks(task, spans, lambda span: advance(len(filters)))
     finally:
         bar.close()
-    return combine_chunks(chunks, scenario, filters, int(seed), config)
+        if owned is not None:
+            owned.close()
+    missing = set(spans) - set(parts)
+    if missing or len(parts) != len(spans):
+        raise RuntimeError(f"the backend returned {len(parts)} chunk(s) for {len(spans)}; missing {sorted(missing)}")
+    if store == "full":
+        return combine_chunks([parts[s] for s in spans], scenario, filters, int(seed), config)
+    return combine_summaries([parts[s] for s in spans], scenario, filters, int(seed), config, runs)

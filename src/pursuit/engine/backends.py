@@ -1,0 +1,362 @@
+"""Where the chunks of a Monte Carlo comparison are computed.
+
+A backend maps a *chunk task* (a picklable callable ``task(start, stop)``
+that computes runs ``[start, stop)``) over the chunks and hands each result
+back as soon as it is finished.  Because a chunk's result is a pure function
+of the scenario, the filters, the root seed and the run range, where it is
+computed does not change a bit of it.
+
+* :class:`Serial`: in this process, one chunk after the other (the default;
+  needs nothing beyond NumPy).
+* :class:`LocalProcesses`: ``workers`` local processes
+  (:mod:`concurrent.futures`).  If a worker process dies, the pool is
+  restarted and every chunk without a result is computed again.
+* :class:`Dask`: a ``dask.distributed`` cluster at ``tcp://HOST:PORT`` (or a
+  ``Client`` you already have).  Needs the optional extra
+  ``pursuit[distributed]``.  When a worker dies, the scheduler gives its
+  chunks to another worker.
+
+In every case a chunk's result is kept once: the engine checks that the
+returned chunks tile the runs exactly, so no run is lost or counted twice.
+
+The command line picks a backend with ``--workers N`` or ``--scheduler
+ADDRESS``; in Python, pass ``backend=`` to
+:func:`pursuit.engine.monte_carlo` or set it for a block of code (for
+example around an experiment's ``run``) with :func:`engine_options`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import multiprocessing
+import uuid
+import warnings
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from typing import Any, Callable, Iterator, Protocol, Sequence
+
+__all__ = [
+    "Backend",
+    "Serial",
+    "LocalProcesses",
+    "Dask",
+    "make_backend",
+    "engine_options",
+    "current_options",
+    "EngineOptions",
+    "WorkerLost",
+]
+
+Span = tuple[int, int]
+OnDone = Callable[[Span], None]
+
+
+class WorkerLost(RuntimeError):
+    """Workers kept dying: a chunk could not be computed within the allowed restarts."""
+
+
+class Backend(Protocol):
+    """What the engine needs from a backend."""
+
+    def map_chunks(
+        self, task: Callable[..., Any], spans: Sequence[Span], on_done: OnDone | None = None, **serial_kwargs: Any
+    ) -> dict[Span, Any]:
+        """Compute ``task(start, stop)`` for every span; call ``on_done(span)`` as each finishes."""
+
+    def describe(self) -> dict[str, Any]:
+        """A JSON-able description for the output's sidecar."""
+
+    def close(self) -> None:
+        """Release processes or connections."""
+
+
+class Serial:
+    """Every chunk in this process, in order.
+
+    Keyword arguments to :meth:`map_chunks` beyond ``on_done`` are passed to
+    the task (the engine passes a per-filter progress hook this way; other
+    backends cannot call back into this process mid-chunk).
+    """
+
+    def map_chunks(self, task, spans, on_done=None, **serial_kwargs) -> dict[Span, Any]:
+        out: dict[Span, Any] = {}
+        for span in spans:
+            out[span] = task(*span, **serial_kwargs)
+            if on_done is not None:
+                on_done(span)
+        return out
+
+    def describe(self) -> dict[str, Any]:
+        return {"backend": "serial", "workers": 1}
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _mp_context() -> multiprocessing.context.BaseContext:
+    """``forkserver`` where it exists (safe with threads in the parent, cheap to start), else ``spawn``."""
+    methods = multiprocessing.get_all_start_methods()
+    ctx = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
+    if ctx.get_start_method() == "forkserver":
+        # Workers fork from a server that has imported pursuit (and NumPy) once.
+        ctx.set_forkserver_preload(["pursuit.engine.montecarlo"])
+    return ctx
+
+
+class LocalProcesses:
+    """Chunks across ``workers`` local processes.
+
+    Parameters
+    ----------
+    workers
+        Number of processes (at least 1).
+    max_restarts
+        How many times the pool may break (a worker killed by the operating
+        system, out of memory, ...) before giving up with :class:`WorkerLost`.
+        After each break the chunks without a result are computed again.
+    """
+
+    def __init__(self, workers: int, *, max_restarts: int = 3):
+        if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+            raise ValueError(f"workers: must be a positive integer, got {workers!r}")
+        self.workers = workers
+        self.max_restarts = int(max_restarts)
+        self.restarts = 0
+        self._pool: ProcessPoolExecutor | None = None
+
+    def _executor(self) -> ProcessPoolExecutor:
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=_mp_context())
+        return self._pool
+
+    def _discard(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+    def map_chunks(self, task, spans, on_done=None, **serial_kwargs) -> dict[Span, Any]:
+        out: dict[Span, Any] = {}
+        todo = [tuple(s) for s in spans]
+        breaks = 0
+        while todo:
+            pool = self._executor()
+            futures: dict[Future, Span] = {pool.submit(task, *span): span for span in todo}
+            broken = False
+            try:
+                pending = set(futures)
+                while pending:
+                    done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                    for fut in done:
+                        exc = fut.exception()
+                        if isinstance(exc, BrokenProcessPool):
+                            broken = True
+                            continue
+                        if exc is not None:
+                            raise exc
+                        span = futures[fut]
+                        out[span] = fut.result()
+                        if on_done is not None:
+                            on_done(span)
+                    if broken:
+                        break
+            except BaseException:
+                for fut in futures:
+                    fut.cancel()
+                raise
+            if broken:
+                # Keep what finished before the break; recompute the rest.
+                for fut, span in futures.items():
+                    if span not in out and fut.done() and not fut.cancelled() and fut.exception() is None:
+                        out[span] = fut.result()
+                        if on_done is not None:
+                            on_done(span)
+                self._discard()
+                breaks += 1
+                self.restarts += 1
+                todo = [s for s in todo if s not in out]
+                if breaks > self.max_restarts:
+                    raise WorkerLost(
+                        f"local worker processes died {breaks} times; {len(todo)} chunk(s) left uncomputed"
+                    )
+                warnings.warn(
+                    f"a worker process died; computing {len(todo)} chunk(s) again", RuntimeWarning, stacklevel=2
+                )
+            else:
+                todo = []
+        return out
+
+    def describe(self) -> dict[str, Any]:
+        return {"backend": "processes", "workers": self.workers}
+
+    def close(self) -> None:
+        self._discard()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _import_distributed():
+    try:
+        import distributed
+    except ImportError:  # pragma: no cover - exercised only without the extra
+        raise ImportError(
+            "a Dask scheduler needs dask.distributed: pip install 'pursuit[distributed]'"
+        ) from None
+    return distributed
+
+
+class Dask:
+    """Chunks on a ``dask.distributed`` cluster.
+
+    Parameters
+    ----------
+    address
+        Scheduler address, e.g. ``tcp://10.0.0.5:8786``; or None with
+        ``client``.
+    client
+        An existing ``distributed.Client`` (not closed by :meth:`close`).
+    timeout
+        Seconds to wait for the scheduler when connecting.
+
+    Notes
+    -----
+    Each chunk is one task.  The reduction of a chunk (in summary mode) runs
+    inside the task, so only the small reduced result travels back.  When a
+    worker dies, the scheduler reschedules its tasks on the remaining workers
+    (up to ``distributed.scheduler.allowed-failures`` times per task, 3 by
+    default).  The workers need pursuit installed (same version), and any
+    user-defined model must be importable there.
+    """
+
+    def __init__(self, address: str | None = None, *, client: Any = None, timeout: float = 30.0):
+        distributed = _import_distributed()
+        if (address is None) == (client is None):
+            raise ValueError("give either a scheduler address or a client")
+        self.address = address
+        self._own = client is None
+        if client is None:
+            try:
+                client = distributed.Client(address, timeout=timeout, set_as_default=False)
+            except OSError as e:
+                raise ConnectionError(f"--scheduler {address}: cannot connect ({e})") from None
+        self.client = client
+
+    def map_chunks(self, task, spans, on_done=None, **serial_kwargs) -> dict[Span, Any]:
+        distributed = _import_distributed()
+        token = uuid.uuid4().hex[:12]
+        futures = {
+            self.client.submit(task, s, e, key=f"pursuit-chunk-{token}-{s}-{e}", pure=False): (s, e) for s, e in spans
+        }
+        out: dict[Span, Any] = {}
+        try:
+            for fut in distributed.as_completed(list(futures)):
+                span = futures[fut]
+                out[span] = fut.result()
+                fut.release()
+                if on_done is not None:
+                    on_done(span)
+        except distributed.KilledWorker as e:
+            raise WorkerLost(f"Dask workers died while computing a chunk too often: {e}") from None
+        finally:
+            for fut in futures:
+                if not fut.done():
+                    fut.cancel()
+        return out
+
+    def describe(self) -> dict[str, Any]:
+        info = self.client.scheduler_info() if hasattr(self.client, "scheduler_info") else {}
+        workers = info.get("workers", {})
+        return {
+            "backend": "dask",
+            "scheduler": self.address or info.get("address"),
+            "workers": len(workers),
+            "threads": int(sum(w.get("nthreads", 0) for w in workers.values())),
+        }
+
+    def close(self) -> None:
+        if self._own:
+            self.client.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def make_backend(workers: int | None = None, scheduler: str | None = None) -> Backend:
+    """The backend for ``--workers`` / ``--scheduler`` (neither: :class:`Serial`)."""
+    if workers is not None and scheduler is not None:
+        raise ValueError("give --workers or --scheduler, not both")
+    if scheduler is not None:
+        if "://" not in scheduler:
+            raise ValueError(f"--scheduler: expected an address like tcp://HOST:PORT, got {scheduler!r}")
+        return Dask(scheduler)
+    if workers is not None:
+        if workers < 1:
+            raise ValueError(f"--workers: must be at least 1, got {workers}")
+        return Serial() if workers == 1 else LocalProcesses(workers)
+    return Serial()
+
+
+# --------------------------------------------------------------------------
+# options for a block of code
+# --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class EngineOptions:
+    """Defaults that :func:`pursuit.engine.monte_carlo` uses when its caller gives none.
+
+    Attributes
+    ----------
+    backend
+        Where chunks are computed (None: in this process).
+    store
+        ``"auto"``, ``"full"`` or ``"summary"`` (see :func:`pursuit.engine.monte_carlo`).
+    keep_runs
+        Example runs kept whole in summary mode.
+    """
+
+    backend: Any = None
+    store: str | None = None
+    keep_runs: int | None = None
+
+
+_OPTIONS: contextvars.ContextVar[EngineOptions] = contextvars.ContextVar("pursuit_engine_options", default=EngineOptions())
+
+
+def current_options() -> EngineOptions:
+    """The options in force (set by :func:`engine_options`)."""
+    return _OPTIONS.get()
+
+
+@contextlib.contextmanager
+def engine_options(*, backend: Any = None, store: str | None = None, keep_runs: int | None = None) -> Iterator[EngineOptions]:
+    """Set the engine's backend and storage mode for every Monte Carlo run inside the block.
+
+    Experiment kinds call :func:`pursuit.engine.monte_carlo` without knowing
+    about backends; the CLI wraps ``Experiment.run`` in this context so that
+    ``--workers`` and ``--scheduler`` reach every comparison the kind makes.
+    """
+    base = _OPTIONS.get()
+    opts = EngineOptions(
+        backend=base.backend if backend is None else backend,
+        store=base.store if store is None else store,
+        keep_runs=base.keep_runs if keep_runs is None else keep_runs,
+    )
+    token = _OPTIONS.set(opts)
+    try:
+        yield opts
+    finally:
+        _OPTIONS.reset(token)
+

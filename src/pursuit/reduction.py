@@ -1,0 +1,293 @@
+"""Sums over Monte Carlo runs that do not depend on how the runs were split.
+
+Floating-point addition is not associative: a sum over 10 000 runs computed
+as ten chunk sums added together differs in its last bits from the same sum
+computed in one pass, and from a split into five chunks.  pursuit promises
+bit-identical summaries whatever the chunk size and the number of workers, so
+every sum *over runs* is defined here by one fixed binary tree over the
+absolute run index:
+
+* the sum over an aligned block of runs ``[j 2^L, (j+1) 2^L)`` is the sum of
+  its two halves (a block of one run is that run's value);
+* the sum over runs ``[0, M)`` adds the maximal aligned blocks that tile
+  ``[0, M)``, left to right.
+
+A chunk ``[start, stop)`` returns the sums of the maximal aligned blocks
+inside it (:func:`block_sums`); :func:`merge_blocks` assembles the blocks of
+all chunks into the canonical sum, adding sibling blocks exactly as a single
+pass would.  The result is therefore the same bits whichever way the runs were
+chunked, and equal to :func:`run_sum` over the full array.
+
+This module also reduces one chunk of one filter's output to the statistics
+that the summaries need (:func:`filter_statistics`), so that a Monte Carlo
+comparison can drop each chunk's arrays once they are reduced and keep memory
+bounded by the chunk size.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from . import metrics
+
+__all__ = [
+    "Blocks",
+    "block_sums",
+    "merge_blocks",
+    "run_sum",
+    "component_groups",
+    "group_key",
+    "PartialStatistics",
+    "FilterStatistics",
+    "filter_statistics",
+    "merge_statistics",
+]
+
+Blocks = dict[tuple[int, int], np.ndarray]
+"""Sums of aligned blocks of runs, keyed by ``(level, index)``: the block covers runs
+``[index * 2**level, (index + 1) * 2**level)``."""
+
+
+def _aligned_spans(start: int, stop: int) -> list[tuple[int, int]]:
+    """The maximal aligned blocks ``(level, index)`` that tile ``[start, stop)``."""
+    spans = []
+    pos = start
+    while pos < stop:
+        level = 0
+        while (pos % (2 << level) == 0) and pos + (2 << level) <= stop:
+            level += 1
+        spans.append((level, pos >> level))
+        pos += 1 << level
+    return spans
+
+
+def _halve(x: np.ndarray, levels: int) -> np.ndarray:
+    """Pairwise sum of the ``2**levels`` leading entries of ``x``, bottom up."""
+    for _ in range(levels):
+        x = x[0::2] + x[1::2]
+    return x[0].copy()
+
+
+def block_sums(values: np.ndarray, start: int) -> Blocks:
+    """Aligned block sums of ``values`` whose leading axis is runs ``start, start + 1, ...``.
+
+    Parameters
+    ----------
+    values
+        ``(c, ...)`` one entry per run, runs first.
+    start
+        Absolute index of the first run.
+
+    Returns
+    -------
+    Blocks
+        Each block's sum has shape ``values.shape[1:]``.
+    """
+    values = np.asarray(values)
+    out: Blocks = {}
+    for level, index in _aligned_spans(start, start + values.shape[0]):
+        lo = (index << level) - start
+        out[(level, index)] = _halve(values[lo : lo + (1 << level)], level)
+    return out
+
+
+def merge_blocks(parts: Iterable[Blocks], total: int) -> np.ndarray:
+    """The canonical sum over runs ``[0, total)`` from the blocks of every chunk.
+
+    Raises
+    ------
+    ValueError
+        If a block arrives twice or a run is missing.
+    """
+    pool: Blocks = {}
+    for part in parts:
+        for key, value in part.items():
+            if key in pool:
+                raise ValueError(f"runs {key[1] << key[0]}..{((key[1] + 1) << key[0]) - 1} were reduced twice")
+            pool[key] = value
+
+    def get(level: int, index: int) -> np.ndarray:
+        v = pool.get((level, index))
+        if v is None:
+            if level == 0:
+                raise ValueError(f"run {index} is missing from the reduced chunks")
+            v = get(level - 1, 2 * index) + get(level - 1, 2 * index + 1)
+        return v
+
+    spans = _aligned_spans(0, total)
+    if not spans:
+        raise ValueError("total: at least one run is needed")
+    acc = get(*spans[0])
+    for span in spans[1:]:
+        acc = acc + get(*span)
+    return acc
+
+
+def run_sum(values: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Canonical sum over ``axis`` (the runs), equal to the merged chunk sums bit for bit."""
+    v = np.moveaxis(np.asarray(values), axis, 0)
+    return merge_blocks([block_sums(v, 0)], v.shape[0])
+
+
+# --------------------------------------------------------------------------
+# per-filter statistics
+# --------------------------------------------------------------------------
+def group_key(indices: Sequence[int]) -> str:
+    """The name under which a group of state indices is reduced: ``(0, 2)`` -> ``"0,2"``."""
+    return ",".join(str(int(i)) for i in indices)
+
+
+def component_groups(n: int, position: Sequence[int], velocity: Sequence[int]) -> list[tuple[int, ...]]:
+    """The index groups whose errors every reduction keeps.
+
+    Position, velocity, the whole state and each single component; the
+    summaries (RMSE of position, velocity and each component) need no more.
+    """
+    groups: list[tuple[int, ...]] = []
+    for g in (tuple(position), tuple(velocity), tuple(range(n)), *((i,) for i in range(n))):
+        if g and g not in groups:
+            groups.append(g)
+    return groups
+
+
+def squared_error_of(error: np.ndarray, indices: Sequence[int]) -> np.ndarray:
+    """Sum of squared error components, added in index order (batch-invariant)."""
+    idx = list(indices)
+    out = error[..., idx[0]] ** 2
+    for i in idx[1:]:
+        out = out + error[..., i] ** 2
+    return out
+
+
+def _steps_mean(values: np.ndarray) -> np.ndarray:
+    """Mean over the leading (time) axis with the canonical tree: ``(K, c) -> (c,)``."""
+    return run_sum(values, axis=0) / values.shape[0]
+
+
+@dataclass
+class PartialStatistics:
+    """One chunk of one filter, reduced.
+
+    Attributes
+    ----------
+    start, stop
+        The runs covered.
+    sums
+        Quantity name -> aligned block sums over runs of a ``(K,)`` per-step value.
+    per_run
+        Quantity name -> ``(stop - start,)`` one value per run.
+    """
+
+    start: int
+    stop: int
+    sums: dict[str, Blocks] = field(default_factory=dict)
+    per_run: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+@dataclass
+class FilterStatistics:
+    """What the summaries of one filter need, over all runs.
+
+    Quantities in ``sums`` (each ``(K,)``, summed over runs):
+
+    * ``sse:G``: squared error of index group ``G`` (see :func:`group_key`);
+    * ``nees``, ``nees_count``, ``nees_dof``: NEES over runs where it is
+      finite, how many, and their χ² degrees of freedom summed;
+    * ``nis``, ``nis_count``, ``nis_dof``: the same for NIS;
+    * ``info:KEY`` and ``info:KEY_count``: any other scalar step-info value
+      (fading factor, ESS, ...) over runs where it is finite.
+
+    ``per_run`` holds ``mse:G`` (each run's time-averaged squared error of
+    group ``G``), ``(M,)``.
+    """
+
+    runs: int
+    steps: int
+    sums: dict[str, np.ndarray] = field(default_factory=dict)
+    per_run: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def require(self, name: str) -> np.ndarray:
+        """A per-step sum by name, with a clear error when it was not reduced."""
+        try:
+            return self.sums[name]
+        except KeyError:
+            have = ", ".join(sorted(self.sums))
+            raise KeyError(f"{name!r} was not reduced (have: {have})") from None
+
+
+def _finite_sums(out: PartialStatistics, name: str, values: np.ndarray, dof: np.ndarray | None) -> None:
+    """Reduce a ``(K, c)`` value where finite: its sum, count and (optionally) dof sum."""
+    ok = np.isfinite(values)
+    out.sums[name] = block_sums(np.where(ok, values, 0.0).T, out.start)
+    out.sums[f"{name}_count"] = block_sums(ok.T.astype(float), out.start)
+    if dof is not None:
+        out.sums[f"{name}_dof"] = block_sums(np.where(ok, dof, 0.0).T, out.start)
+
+
+def filter_statistics(
+    truth: np.ndarray,
+    estimates: np.ndarray,
+    covariances: np.ndarray | None,
+    info: dict[str, np.ndarray],
+    start: int,
+    groups: Sequence[Sequence[int]],
+) -> PartialStatistics:
+    """Reduce one chunk of one filter's output.
+
+    Parameters
+    ----------
+    truth, estimates
+        ``(K, c, n)`` for runs ``start .. start + c - 1``.
+    covariances
+        ``(K, c, n, n)`` or None (then no NEES).
+    info
+        Step info ``{key: (K, c, ...)}``.
+    start
+        Absolute index of the chunk's first run.
+    groups
+        Index groups to reduce (see :func:`component_groups`).
+    """
+    K, c, n = truth.shape
+    out = PartialStatistics(start, start + c)
+    error = np.asarray(estimates, dtype=float) - np.asarray(truth, dtype=float)
+    for g in groups:
+        sq = squared_error_of(error, g)
+        key = group_key(g)
+        out.sums[f"sse:{key}"] = block_sums(sq.T, start)
+        out.per_run[f"mse:{key}"] = _steps_mean(sq)
+    if covariances is not None:
+        _finite_sums(out, "nees", metrics.nees(estimates, covariances, truth), np.full((K, c), float(n)))
+    if "nis" in info:
+        nis = np.asarray(info["nis"], dtype=float)
+        dof = np.broadcast_to(np.asarray(info.get("dof", 1), dtype=float), nis.shape)
+        _finite_sums(out, "nis", nis, dof)
+    for key, value in info.items():
+        if key in ("nis", "dof"):
+            continue
+        value = np.asarray(value)
+        if value.shape == (K, c) and value.dtype.kind in "biuf":
+            _finite_sums(out, f"info:{key}", value.astype(float), None)
+    return out
+
+
+def merge_statistics(parts: Sequence[PartialStatistics], runs: int, steps: int) -> FilterStatistics:
+    """Assemble the partial statistics of every chunk (any order) into totals over ``runs``."""
+    parts = sorted(parts, key=lambda p: p.start)
+    pos = 0
+    for p in parts:
+        if p.start != pos:
+            what = "reduced twice" if p.start < pos else "missing"
+            raise ValueError(f"runs {min(p.start, pos)}..{max(p.start, pos) - 1} are {what}")
+        pos = p.stop
+    if pos != runs:
+        raise ValueError(f"runs {pos}..{runs - 1} are missing" if pos < runs else f"got runs beyond {runs - 1}")
+    names = list(parts[0].sums) if parts else []
+    for p in parts[1:]:
+        if list(p.sums) != names or list(p.per_run) != list(parts[0].per_run):
+            raise ValueError(f"chunk {p.start}..{p.stop - 1} reduced different quantities")
+    sums = {name: merge_blocks([p.sums[name] for p in parts], runs) for name in names}
+    per_run = {name: np.concatenate([p.per_run[name] for p in parts]) for name in parts[0].per_run}
+    return FilterStatistics(runs=runs, steps=steps, sums=sums, per_run=per_run)
