@@ -20,6 +20,19 @@ from .track import Track
 
 __version__ = "0.1.0.dev0"
 
+
+def load(folder):
+    """Read an output folder written by ``pursuit run`` / ``reproduce`` back into an ExperimentOutput.
+
+    ``load(DIR).result`` is the result object when the experiment has one;
+    ``load(DIR).results`` maps every saved result's name to it.  See
+    :func:`pursuit.storage.load`.
+    """
+    from .storage import load as _load
+
+    return _load(folder)
+
+
 __all__ = [
     "Gaussian",
     "RunStreams",
@@ -37,5 +50,6 @@ __all__ = [
     "StrongTracking",
     "Improved",
     "rts_smooth",
+    "load",
     "__version__",
 ]

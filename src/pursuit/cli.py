@@ -3,6 +3,10 @@
 ``pursuit list``                      models, filters, scenarios, experiments
 ``pursuit run CONFIG.toml``           run one experiment file
 ``pursuit reproduce NAME|all``        run bundled experiments (``experiments/NAME.toml``)
+``pursuit report DIR``                rebuild report.html (and the index) from saved results
+
+``run`` and ``reproduce`` take ``--workers N`` (local processes) or
+``--scheduler tcp://HOST:PORT`` (a Dask cluster) to spread the chunks of runs.
 
 Exit codes: 0 success, 2 bad input (config, arguments), 1 unexpected failure.
 """
@@ -41,8 +45,29 @@ def _parser() -> argparse.ArgumentParser:
         sp.add_argument("--seed", type=int, help="override the root seed")
         sp.add_argument("--chunk-size", type=int, help="runs per chunk (memory bound)")
         sp.add_argument("--no-progress", action="store_true", help="never show a progress bar")
-        sp.add_argument("--pdf", action="store_true", help="also write figures as PDF")
+        sp.add_argument("--no-pdf", action="store_true", help="write figures as PNG only (default: PNG and PDF)")
+        sp.add_argument("--pdf", action="store_true", help=argparse.SUPPRESS)  # PDF is now the default
+        _add_engine_arguments(sp)
+
+    rp = sub.add_parser("report", help="rebuild report.html from a saved output folder (or every folder under it)")
+    rp.add_argument("dir", help="an output folder (with run.json), or a folder of them such as results/")
     return p
+
+
+def _add_engine_arguments(sp: argparse.ArgumentParser) -> None:
+    g = sp.add_argument_group("where the runs are computed")
+    where = g.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="N", help="spread chunks of runs over N local processes")
+    where.add_argument(
+        "--scheduler", metavar="tcp://HOST:PORT", help="run the chunks on a Dask cluster (needs pursuit[distributed])"
+    )
+    g.add_argument(
+        "--store",
+        choices=["auto", "full", "summary"],
+        help="keep every run's arrays (full) or reduce each chunk (summary: memory bounded by the chunk size); "
+        "default auto: full unless that would take more than 1 GiB",
+    )
+    g.add_argument("--keep-runs", type=int, metavar="R", help="runs kept whole in summary mode (default 10)")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -55,6 +80,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_run(args)
         if args.command == "reproduce":
             return _cmd_reproduce(args)
+        if args.command == "report":
+            return _cmd_report(args)
     except ConfigError as e:
         print(f"pursuit: error: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -88,36 +115,61 @@ def _cmd_list(args) -> int:
 
 
 def _check_overrides(args, source: str) -> None:
-    for flag, value in (("--runs", args.runs), ("--chunk-size", args.chunk_size)):
+    for flag, value in (("--runs", args.runs), ("--chunk-size", args.chunk_size), ("--workers", args.workers)):
         if value is not None and value < 1:
             raise ConfigError(source, f"{flag}: must be at least 1, got {value}")
+    if args.keep_runs is not None and args.keep_runs < 0:
+        raise ConfigError(source, f"--keep-runs: must be a non-negative integer, got {args.keep_runs}")
+    if args.scheduler is not None and "://" not in args.scheduler:
+        raise ConfigError(source, f"--scheduler: expected an address like tcp://HOST:PORT, got {args.scheduler!r}")
     if args.seed is not None and args.seed < 0:
         raise ConfigError(source, f"--seed: must be a non-negative integer, got {args.seed}")
 
 
-def _execute(exp, out_dir: Path, args) -> None:
+def _backend(args, source: str):
+    from .engine.backends import make_backend
+
+    try:
+        return make_backend(workers=args.workers, scheduler=args.scheduler)
+    except (ImportError, ConnectionError, OSError, ValueError) as e:
+        raise ConfigError(source, str(e)) from None
+
+
+def _execute(exp, out_dir: Path, args, backend) -> None:
+    from .engine.backends import engine_options
+    from .engine.montecarlo import DEFAULT_CHUNK
     from .report.output import format_table, write_output
 
-    output = exp.run(runs=args.runs, seed=args.seed, progress=not args.no_progress, chunk_size=args.chunk_size)
+    with engine_options(backend=backend, store=args.store, keep_runs=args.keep_runs):
+        output = exp.run(runs=args.runs, seed=args.seed, progress=not args.no_progress, chunk_size=args.chunk_size)
     header = exp.title or exp.name
     print(f"== {exp.name}: {header}")
     for table in output.tables:
         print()
         print(format_table(table))
-    formats = ("png", "pdf") if args.pdf else ("png",)
-    write_output(output, out_dir, formats=formats)
-    print(f"\nwrote {out_dir}")
+    formats = ("png",) if args.no_pdf else ("png", "pdf")
+    engine = {
+        "backend": backend.describe(),
+        "chunk_size": output.sidecar.get("chunk_size") or DEFAULT_CHUNK,
+        "store": args.store or "auto",
+    }
+    command = " ".join(["pursuit", *(sys.argv[1:] if sys.argv and sys.argv[0].endswith("pursuit") else [])]) or None
+    write_output(output, out_dir, formats=formats, engine=engine, command=command)
+    print(f"\nwrote {out_dir} (report: {out_dir / 'report.html'})")
 
 
 def _cmd_run(args) -> int:
     _check_overrides(args, args.config)
     exp = load_experiment(args.config)
     out = Path(args.out) if args.out else Path("results") / exp.name
-    _execute(exp, out, args)
+    with _backend(args, args.config) as backend:
+        _execute(exp, out, args, backend)
     return 0
 
 
 def _cmd_reproduce(args) -> int:
+    from .report.html import write_index
+
     _check_overrides(args, args.name)
     names = list_experiments() if args.name == "all" else [args.name]
     if not names:
@@ -125,9 +177,37 @@ def _cmd_reproduce(args) -> int:
     # Validate every file before running any, so a bad one stops the batch early.
     exps = [load_experiment(find_experiment(n)) for n in names]
     root = Path(args.out) if args.out else Path("results")
-    for exp in exps:
-        _execute(exp, root / exp.name, args)
-        print()
+    with _backend(args, args.name) as backend:
+        for exp in exps:
+            _execute(exp, root / exp.name, args, backend)
+            print()
+    if args.name == "all":
+        index = write_index(root, [root / exp.name for exp in exps])
+        print(f"wrote {index}")
+    return 0
+
+
+def _cmd_report(args) -> int:
+    from .report.html import write_index, write_report
+    from .storage import iter_output_folders
+
+    folder = Path(args.dir)
+    if not folder.is_dir():
+        raise ConfigError(folder, "no such folder")
+    try:
+        if (folder / "run.json").is_file():
+            print(f"wrote {write_report(folder)}")
+            return 0
+        subs = list(iter_output_folders(folder))
+        if not subs:
+            raise ConfigError(folder, "not a pursuit output folder: no run.json here or in its sub-folders")
+        for sub in subs:
+            print(f"wrote {write_report(sub)}")
+        print(f"wrote {write_index(folder, subs)}")
+    except ValueError as e:
+        if isinstance(e, ConfigError):
+            raise
+        raise ConfigError(folder, str(e)) from None
     return 0
 
 

@@ -85,6 +85,14 @@ class ExperimentOutput:
     results: dict[str, Any] = field(default_factory=dict)
     sidecar: dict[str, Any] = field(default_factory=dict)
 
+    @property
+    def result(self) -> Any:
+        """The only result object (``results`` with one entry); an error naming them otherwise."""
+        if len(self.results) != 1:
+            names = ", ".join(map(str, self.results)) or "none"
+            raise ValueError(f"{self.name}: {len(self.results)} results ({names}); pick one from .results")
+        return next(iter(self.results.values()))
+
 
 @dataclass
 class Experiment:
@@ -114,6 +122,7 @@ class Experiment:
     path: Path
     document: dict[str, Any]
     plan: Any
+    reference: str = ""
 
     def run(
         self, *, runs: int | None = None, seed: int | None = None, progress: bool = False, chunk_size: int | None = None
@@ -128,6 +137,17 @@ class Experiment:
         out.sidecar.setdefault("config", self.document)
         out.sidecar.setdefault("runs", runs)
         out.sidecar.setdefault("seed", seed)
+        out.sidecar.setdefault("chunk_size", chunk)
+        if self.reference:
+            out.sidecar.setdefault("reference", self.reference)
+        try:
+            out.sidecar.setdefault("config_text", self.path.read_text(encoding="utf-8"))
+        except OSError:
+            pass
+        if not out.title:
+            out.title = self.title
+        if not out.description:
+            out.description = self.description
         return out
 
 
@@ -204,6 +224,7 @@ def _build(doc: dict[str, Any], path: Path) -> Experiment:
         path=path,
         document=doc,
         plan=plan,
+        reference=values["reference"],
     )
 
 

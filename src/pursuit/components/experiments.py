@@ -156,7 +156,7 @@ def standard_figures(result: MonteCarloResult, scenario: Any, figure_opts: dict[
         figs["rmse_velocity"] = rmse_over_time(result, "velocity", log=log)
     if not result.position_indices and not result.velocity_indices:
         figs["rmse_state"] = rmse_over_time(result, "state", log=log, unit="")
-    run = min(max(figure_opts.get("trajectory_run", 0), 0), result.runs - 1)
+    run = min(max(figure_opts.get("trajectory_run", 0), 0), result.stored().runs - 1)
     anchors = getattr(getattr(scenario, "measurement", None), "anchors", None)
     figs["trajectory"] = trajectory(result, run, landmarks=anchors)
     return figs

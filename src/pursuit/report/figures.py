@@ -9,7 +9,7 @@ from matplotlib.figure import Figure
 
 from ..results import MonteCarloResult
 
-__all__ = ["rmse_over_time", "trajectory", "fading_over_time", "mark_events", "UNITS"]
+__all__ = ["rmse_over_time", "trajectory", "fading_over_time", "mark_events", "UNITS", "figure_problems"]
 
 UNITS = {"position": "m", "velocity": "m/s", "acceleration": "m/s²"}
 
@@ -57,7 +57,12 @@ def rmse_over_time(
         ax.plot(result.times, result.rmse_per_step(name, component), label=name, linewidth=1.4)
     if log:
         ax.set_yscale("log")
-    u = unit if unit is not None else UNITS.get(label, "")
+    if unit is not None:
+        u = unit
+    else:
+        idx = result.indices(component)
+        units = {result.unit(i) for i in idx}
+        u = units.pop() if len(units) == 1 else UNITS.get(label, "")
     ax.set_xlabel("time (s)")
     ax.set_ylabel(f"{label} RMSE ({u})" if u else f"{label} RMSE")
     ax.set_title(title or f"{label.capitalize()} RMSE over {result.runs} runs")
@@ -89,8 +94,11 @@ def trajectory(
     (first two position axes); with one it is position against time; with
     none, the first state component against time.
     """
-    if not 0 <= run < result.runs:
-        raise ValueError(f"run: must lie in [0, {result.runs - 1}], got {run}")
+    stored = result.stored()
+    if not 0 <= run < stored.runs:
+        kept = "" if stored is result else f" (only runs 0..{stored.runs - 1} of {result.runs} were kept whole)"
+        raise ValueError(f"run: must lie in [0, {stored.runs - 1}], got {run}{kept}")
+    result = stored
     fig, ax = _new(6.4, 4.8)
     names = list(filters) if filters is not None else result.filter_names
     pos = list(result.position_indices) or [0]
@@ -104,8 +112,8 @@ def trajectory(
         if landmarks is not None and len(landmarks):
             lm = np.asarray(landmarks)
             ax.scatter(lm[:, 0], lm[:, 1], marker="^", color="tab:red", zorder=5, label="sensors")
-        ax.set_xlabel(f"{result.state_labels[i]} (m)")
-        ax.set_ylabel(f"{result.state_labels[j]} (m)")
+        ax.set_xlabel(_labelled(result.state_labels[i], result.unit(i) or "m"))
+        ax.set_ylabel(_labelled(result.state_labels[j], result.unit(j) or "m"))
         ax.set_aspect("equal", adjustable="datalim")
     else:
         i = pos[0]
@@ -113,7 +121,7 @@ def trajectory(
         for name in names:
             ax.plot(result.times, result.filters[name].estimates[:, run, i], linewidth=1.2, label=name)
         ax.set_xlabel("time (s)")
-        ax.set_ylabel(result.state_labels[i])
+        ax.set_ylabel(_labelled(result.state_labels[i], result.unit(i)))
     ax.set_title(title or f"Truth and estimates, run {run}")
     ax.grid(True, alpha=0.3)
     ax.legend()
@@ -171,3 +179,29 @@ def fading_over_time(
     if title:
         fig.suptitle(title)
     return fig
+
+
+def _labelled(name: str, unit: str) -> str:
+    return f"{name} ({unit})" if unit else name
+
+
+def figure_problems(fig: Figure) -> list[str]:
+    """What keeps a figure from being publication-ready: unlabelled axes, a missing legend.
+
+    Every axes that shows data needs an x and a y label; one that shows more
+    than one labelled line or collection needs a legend.  Returns an empty
+    list for a good figure.
+    """
+    problems = []
+    for n, ax in enumerate(fig.get_axes()):
+        if not (ax.lines or ax.collections or ax.patches or ax.images):
+            continue
+        where = f"axes {n} ({ax.get_title() or 'untitled'})"
+        if not ax.get_xlabel().strip():
+            problems.append(f"{where}: no x label")
+        if not ax.get_ylabel().strip():
+            problems.append(f"{where}: no y label")
+        labelled = [a for a in (*ax.lines, *ax.collections) if not a.get_label().startswith("_")]
+        if len(labelled) > 1 and ax.get_legend() is None:
+            problems.append(f"{where}: {len(labelled)} labelled series but no legend")
+    return problems

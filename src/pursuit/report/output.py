@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import csv
 import json
+import os
+from importlib import metadata
 import platform
 import shutil
 import sys
@@ -16,7 +18,15 @@ import numpy as np
 
 from ..experiment import ExperimentOutput, Table
 
-__all__ = ["write_output", "format_table", "versions"]
+__all__ = ["write_output", "format_table", "versions", "cell", "FILES"]
+
+FILES = {
+    "run.json": "the sidecar: experiment, root seed, runs, configuration, package versions, tables, file manifest",
+    "summary.csv": "one row per filter: RMSEs, consistency, wall time",
+    "errors.csv": "tidy errors: one row per (result, filter, run, step); estimate minus truth per component, NEES, NIS",
+    "per_step.csv": "per (result, filter, step): RMSE of each component over all runs, ANEES, ANIS, step-info means",
+    "report.html": "this report (self-contained)",
+}
 
 
 def versions() -> dict[str, str]:
@@ -26,19 +36,24 @@ def versions() -> dict[str, str]:
 
     from .. import __version__
 
-    return {
+    out = {
         "pursuit": __version__,
         "python": sys.version.split()[0],
         "numpy": np.__version__,
         "scipy": scipy.__version__,
         "matplotlib": matplotlib.__version__,
-        "platform": platform.platform(),
-        "machine": platform.machine(),
-        "processor": platform.processor() or "unknown",
     }
+    for optional in ("dask", "distributed"):
+        try:
+            out[optional] = metadata.version(optional)
+        except metadata.PackageNotFoundError:
+            pass
+    out.update(platform=platform.platform(), machine=platform.machine(), processor=platform.processor() or "unknown")
+    return out
 
 
-def _cell(v: Any) -> str:
+def cell(v: Any) -> str:
+    """One table value as text: floats with four decimals (or scientific when tiny or huge)."""
     if v is None:
         return ""
     if isinstance(v, (float, np.floating)):
@@ -53,7 +68,7 @@ def _cell(v: Any) -> str:
 
 def format_table(table: Table) -> str:
     """A table as aligned plain text, with its title and notes."""
-    cells = [[_cell(v) for v in row] for row in table.rows]
+    cells = [[cell(v) for v in row] for row in table.rows]
     widths = [max([len(c)] + [len(r[i]) for r in cells]) for i, c in enumerate(table.columns)]
     lines = [table.title] if table.title else []
     lines.append("  ".join(c.ljust(w) for c, w in zip(table.columns, widths)))
@@ -93,19 +108,59 @@ def _json_default(o: Any) -> Any:
     return repr(o)
 
 
-def write_output(output: ExperimentOutput, out_dir: str | Path, *, formats: tuple[str, ...] = ("png",)) -> Path:
-    """Write tables (CSV), figures and the ``run.json`` sidecar into ``out_dir``.
+def write_output(
+    output: ExperimentOutput,
+    out_dir: str | Path,
+    *,
+    formats: tuple[str, ...] = ("png", "pdf"),
+    engine: dict[str, Any] | None = None,
+    command: str | None = None,
+) -> Path:
+    """Write an experiment's output folder: tables, results, figures, sidecar and report.
 
+    Writes one CSV per table, the tidy ``errors.csv`` and ``per_step.csv``
+    of every result object, ``results/NAME.npz`` (read back by
+    :func:`pursuit.load`), the figures in each of ``formats``, the
+    ``run.json`` sidecar and ``report.html`` (see :mod:`pursuit.storage`).
     Everything is written into a temporary folder beside ``out_dir`` and
     moved into place only when complete, so an error leaves either the
     previous output or nothing, never a half-written folder.
+
+    Parameters
+    ----------
+    output
+        What the experiment produced.
+    out_dir
+        The folder to (re)place.
+    formats
+        Figure formats (PNG is always written: the report embeds it).
+    engine
+        How the runs were computed (backend, chunk size, storage), for the sidecar.
+    command
+        The command line that produced it, for the sidecar.
     """
+    from ..storage import monte_carlo_results, save_results, write_errors_csv, write_per_step_csv
+    from .html import write_report
+
+    formats = tuple(dict.fromkeys(("png", *formats)))
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
     try:
+        mask = os.umask(0)
+        os.umask(mask)
+        os.chmod(tmp, 0o777 & ~mask)  # mkdtemp makes it private; the folder is meant to be shared
+        files = {}
         for table in output.tables:
             _write_csv(tmp / f"{table.name}.csv", table)
+            files[f"{table.name}.csv"] = table.title or table.name
+        mc = monte_carlo_results(output.results)
+        if mc:
+            write_errors_csv(tmp / "errors.csv", output.name, mc)
+            write_per_step_csv(tmp / "per_step.csv", output.name, mc)
+            files["errors.csv"] = FILES["errors.csv"]
+            files["per_step.csv"] = FILES["per_step.csv"]
+        manifest = save_results(output.results, tmp / "results")
         if output.figures:
             (tmp / "figures").mkdir()
             for name, fig in output.figures.items():
@@ -113,11 +168,27 @@ def write_output(output: ExperimentOutput, out_dir: str | Path, *, formats: tupl
                     fig.savefig(tmp / "figures" / f"{name}.{fmt}", dpi=150)
         sidecar = dict(output.sidecar)
         sidecar.setdefault("experiment", output.name)
+        if output.title:
+            sidecar.setdefault("title", output.title)
+        if output.description:
+            sidecar.setdefault("description", output.description)
+        if engine:
+            sidecar["engine"] = engine
+        if command:
+            sidecar["command"] = command
         sidecar["written"] = datetime.now(timezone.utc)
         sidecar["versions"] = versions()
-        sidecar["tables"] = {t.name: {"title": t.title, "columns": t.columns, "rows": t.rows} for t in output.tables}
-        sidecar["figures"] = sorted(output.figures)
+        sidecar["tables"] = {
+            t.name: {"title": t.title, "kind": t.kind, "notes": t.notes, "columns": t.columns, "rows": t.rows}
+            for t in output.tables
+        }
+        sidecar["figures"] = list(output.figures)
+        sidecar["figure_formats"] = list(formats)
+        sidecar["results"] = manifest
+        files["report.html"] = FILES["report.html"]
+        sidecar["files"] = {"run.json": FILES["run.json"], **files}
         (tmp / "run.json").write_text(json.dumps(sidecar, indent=2, default=_json_default) + "\n")
+        write_report(tmp)
         old = None
         if out_dir.exists():
             old = out_dir.with_name(f".{out_dir.name}.old-{tmp.name.rsplit('.', 1)[-1]}")
