@@ -228,6 +228,9 @@ class Dask:
         An existing ``distributed.Client`` (not closed by :meth:`close`).
     timeout
         Seconds to wait for the scheduler when connecting.
+    wait_timeout
+        Seconds to wait for all chunks of one comparison (None: no limit);
+        past it, :class:`TimeoutError`.
 
     Notes
     -----
@@ -239,11 +242,14 @@ class Dask:
     user-defined model must be importable there.
     """
 
-    def __init__(self, address: str | None = None, *, client: Any = None, timeout: float = 30.0):
+    def __init__(
+        self, address: str | None = None, *, client: Any = None, timeout: float = 30.0, wait_timeout: float | None = None
+    ):
         distributed = _import_distributed()
         if (address is None) == (client is None):
             raise ValueError("give either a scheduler address or a client")
         self.address = address
+        self.wait_timeout = wait_timeout
         self._own = client is None
         if client is None:
             try:
@@ -260,7 +266,7 @@ class Dask:
         }
         out: dict[Span, Any] = {}
         try:
-            for fut in distributed.as_completed(list(futures)):
+            for fut in distributed.as_completed(list(futures), loop=self.client.loop, timeout=self.wait_timeout):
                 span = futures[fut]
                 out[span] = fut.result()
                 fut.release()

@@ -1,0 +1,161 @@
+"""Picklable test doubles for the backend tests (imported by worker processes too)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pursuit.scenarios import WSNRange
+
+SMALL = WSNRange(steps=20)
+"""A cheap scenario: 20 steps of WSN range tracking."""
+
+
+def small_filters():
+    """EKF and CKF on :data:`SMALL` (one Jacobian-based, one sigma-point filter)."""
+    import pursuit as pu
+
+    return [pu.ExtendedKalmanFilter(SMALL.motion, SMALL.measurement), pu.CubatureKalmanFilter(SMALL.motion, SMALL.measurement)]
+
+
+@dataclass(frozen=True)
+class PauseOnce:
+    """A scenario that, the first time any process simulates with it, writes its pid and waits.
+
+    The first caller (chosen atomically through ``O_EXCL`` on ``marker``)
+    writes its process id to ``marker`` and sleeps, so that a test can kill
+    that worker in the middle of a chunk.  Every later call, including the
+    recomputation of the killed chunk, simulates normally.
+    """
+
+    inner: Any
+    marker: str
+    pause_s: float = 120.0
+
+    def __getattr__(self, name: str) -> Any:
+        if name in ("inner", "marker", "pause_s") or name.startswith("__"):
+            raise AttributeError(name)
+        return getattr(self.inner, name)
+
+    @property
+    def name(self) -> str:
+        return self.inner.name
+
+    def simulate(self, rng, runs=None):
+        try:
+            fd = os.open(self.marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            return self.inner.simulate(rng, runs)
+        os.write(fd, str(os.getpid()).encode())
+        os.close(fd)
+        time.sleep(self.pause_s)  # the test kills this process meanwhile
+        raise RuntimeError("PauseOnce: the test did not kill the paused worker")
+
+
+@dataclass(frozen=True)
+class Slow:
+    """A scenario that sleeps before simulating, so chunks finish one by one."""
+
+    inner: Any
+    delay_s: float
+
+    def __getattr__(self, name: str) -> Any:
+        if name in ("inner", "delay_s") or name.startswith("__"):
+            raise AttributeError(name)
+        return getattr(self.inner, name)
+
+    @property
+    def name(self) -> str:
+        return self.inner.name
+
+    def simulate(self, rng, runs=None):
+        time.sleep(self.delay_s)
+        return self.inner.simulate(rng, runs)
+
+
+@dataclass(frozen=True)
+class Failing:
+    """A scenario whose simulation raises (a bug in user code), to check it is not retried."""
+
+    inner: Any
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "inner" or name.startswith("__"):
+            raise AttributeError(name)
+        return getattr(self.inner, name)
+
+    @property
+    def name(self) -> str:
+        return self.inner.name
+
+    def simulate(self, rng, runs=None):
+        raise ValueError("deliberate failure in simulate")
+
+
+class Killer(threading.Thread):
+    """Waits for a :class:`PauseOnce` marker and SIGKILLs the process whose pid it holds."""
+
+    def __init__(self, marker: str | Path, timeout: float = 120.0):
+        super().__init__(daemon=True)
+        self.marker = Path(marker)
+        self.timeout = timeout
+        self.killed: int | None = None
+        self.error: str | None = None
+
+    def run(self) -> None:
+        deadline = time.monotonic() + self.timeout
+        while time.monotonic() < deadline:
+            try:
+                text = self.marker.read_text()
+            except FileNotFoundError:
+                text = ""
+            if text:
+                pid = int(text)
+                os.kill(pid, signal.SIGKILL)
+                self.killed = pid
+                return
+            time.sleep(0.02)
+        self.error = f"no worker paused within {self.timeout} s"
+
+
+def assert_same_result(a, b) -> None:
+    """Two MonteCarloResults hold the same bits (everything but wall times)."""
+    import numpy as np
+
+    assert a.runs == b.runs and a.store == b.store
+    if a.store == "full":
+        assert np.array_equal(a.truth, b.truth)
+        assert np.array_equal(a.measurements, b.measurements, equal_nan=True)
+    for name in a.filters:
+        fa, fb = a.filters[name], b.filters[name]
+        if a.store == "full":
+            assert np.array_equal(fa.estimates, fb.estimates), name
+            assert np.array_equal(fa.covariances, fb.covariances), name
+            assert fa.info.keys() == fb.info.keys()
+            for key in fa.info:
+                assert np.array_equal(fa.info[key], fb.info[key], equal_nan=True), (name, key)
+        sa, sb = a.filter_statistics(name), b.filter_statistics(name)
+        for key in sa.sums:
+            assert np.array_equal(sa.sums[key], sb.sums[key], equal_nan=True), (name, key)
+        for key in sa.per_run:
+            assert np.array_equal(sa.per_run[key], sb.per_run[key], equal_nan=True), (name, key)
+    assert_same_summary(a, b)
+
+
+def assert_same_summary(a, b) -> None:
+    """Summary tables equal bit for bit, wall times aside."""
+    import math
+
+    for ra, rb in zip(a.summary(), b.summary(), strict=True):
+        assert ra.keys() == rb.keys()
+        for key in ra:
+            if key == "wall_time_s":
+                continue
+            x, y = ra[key], rb[key]
+            same = x == y or (isinstance(x, float) and math.isnan(x) and math.isnan(y))
+            assert same, (ra["filter"], key, x, y)

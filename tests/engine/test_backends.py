@@ -1,0 +1,120 @@
+"""Backends: local processes give the serial bits, survive a killed worker, report progress."""
+
+import pickle
+import warnings
+
+import numpy as np
+import pytest
+
+from pursuit.components.scenarios import _cv_position, _wsn
+from pursuit.engine import monte_carlo
+from pursuit.engine.backends import LocalProcesses, Serial, engine_options, make_backend
+from pursuit.scenarios import LinearCV, WSNRange
+
+from ..filters.cases import CASES, NONLINEAR_CASES
+from .helpers import SMALL, Failing, Killer, PauseOnce, Slow, assert_same_result, small_filters
+
+RUNS, SEED = 30, 3
+
+
+@pytest.fixture(scope="module")
+def serial():
+    return monte_carlo(SMALL, small_filters(), RUNS, SEED, chunk_size=RUNS)
+
+
+@pytest.fixture(scope="module")
+def pool():
+    with LocalProcesses(2) as backend:
+        yield backend
+
+
+PAIRS = [(c, LinearCV(ndim=2, steps=5)) for c in CASES] + [(c, WSNRange(steps=5)) for c in NONLINEAR_CASES]
+
+
+@pytest.mark.parametrize("case, scenario", PAIRS, ids=[f"{c.id}-{type(s).__name__}" for c, s in PAIRS])
+def test_filters_and_scenarios_pickle(case, scenario):
+    """Backends ship scenarios and filters to other processes: they must pickle and behave the same."""
+    filt = case.build(scenario)
+    s2, f2 = pickle.loads(pickle.dumps((scenario, filt)))
+    a = monte_carlo(scenario, [filt], 3, 1)
+    b = monte_carlo(s2, [f2], 3, 1)
+    assert_same_result(a, b)
+
+
+def test_registered_scenarios_pickle():
+    for s in (_wsn(anchors=[[0.0, 0.0], [50.0, 0.0], [0.0, 50.0]], sigma=1.0, steps=5, dt=1.0, q=0.01, noise="discrete",
+                   x0=[1.0, 0.1, 2.0, 0.1], P0=[1.0, 0.1, 1.0, 0.1], prior_mean="sampled"),
+              _cv_position(ndim=1, dt=1.0, q=0.1, sigma=1.0, steps=5, x0=None, P0=None, prior_mean="truth")):
+        s2 = pickle.loads(pickle.dumps(s))
+        assert np.array_equal(s.simulate(np.random.default_rng(0), 2).truth, s2.simulate(np.random.default_rng(0), 2).truth)
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 30])
+def test_processes_equal_serial(serial, pool, chunk):
+    got = monte_carlo(SMALL, small_filters(), RUNS, SEED, chunk_size=chunk, backend=pool)
+    assert_same_result(serial, got)
+
+
+def test_processes_summary_equals_serial_full(serial, pool):
+    got = monte_carlo(SMALL, small_filters(), RUNS, SEED, chunk_size=4, backend=pool, store="summary")
+    assert got.store == "summary"
+    from .helpers import assert_same_summary
+
+    assert_same_summary(serial, got)
+
+
+def test_engine_options_reach_monte_carlo(serial, pool):
+    with engine_options(backend=pool, store="summary", keep_runs=3):
+        got = monte_carlo(SMALL, small_filters(), RUNS, SEED, chunk_size=8)
+    assert got.store == "summary" and got.stored().runs == 3
+    assert monte_carlo(SMALL, small_filters(), 2, SEED).store == "full"  # the options ended with the block
+
+
+def test_progress_advances_as_chunks_finish(pool):
+    seen = []
+    scenario = Slow(SMALL, 0.15)
+    monte_carlo(scenario, small_filters(), 12, SEED, chunk_size=3, backend=pool, progress=lambda d, t: seen.append((d, t)))
+    assert [d for d, _ in seen] == [2, 4, 6, 8]  # one advance of len(filters) per chunk
+    assert all(t == 8 for _, t in seen)
+
+
+def test_serial_progress_counts_filters():
+    seen = []
+    monte_carlo(SMALL, small_filters(), 6, SEED, chunk_size=3, progress=lambda d, t: seen.append(d))
+    assert seen == [1, 2, 3, 4]
+
+
+def test_killed_worker_chunk_is_recomputed(serial, tmp_path):
+    """SIGKILL a worker in the middle of a chunk: the pool restarts and nothing is lost or doubled."""
+    marker = tmp_path / "paused.pid"
+    scenario = PauseOnce(SMALL, str(marker))
+    killer = Killer(marker, timeout=60)
+    killer.start()
+    with LocalProcesses(2) as backend, warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        got = monte_carlo(scenario, small_filters(), RUNS, SEED, chunk_size=5, backend=backend)
+        restarts = backend.restarts
+    killer.join(5)
+    assert killer.error is None and killer.killed is not None
+    assert restarts == 1
+    assert any("worker process died" in str(w.message) for w in caught)
+    assert_same_result(serial, got)
+
+
+def test_task_errors_are_raised_not_retried(pool):
+    with pytest.raises(ValueError, match="deliberate failure"):
+        monte_carlo(Failing(SMALL), small_filters(), 4, SEED, chunk_size=2, backend=pool)
+    assert pool.restarts == 0
+
+
+def test_make_backend_checks_its_arguments():
+    assert isinstance(make_backend(), Serial)
+    assert isinstance(make_backend(workers=1), Serial)
+    with pytest.raises(ValueError, match="not both"):
+        make_backend(workers=2, scheduler="tcp://127.0.0.1:1")
+    with pytest.raises(ValueError, match="--workers"):
+        make_backend(workers=0)
+    with pytest.raises(ValueError, match="tcp://HOST:PORT"):
+        make_backend(scheduler="127.0.0.1:8786")
+    with pytest.raises(ValueError, match="workers"):
+        LocalProcesses(0)
