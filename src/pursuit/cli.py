@@ -14,6 +14,7 @@ Exit codes: 0 success, 2 bad input (config, arguments), 1 unexpected failure.
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from pathlib import Path
 from typing import Sequence
@@ -72,7 +73,9 @@ def _add_engine_arguments(sp: argparse.ArgumentParser) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
     args = _parser().parse_args(argv)
+    args.argv = argv
     try:
         if args.command == "list":
             return _cmd_list(args)
@@ -153,7 +156,7 @@ def _execute(exp, out_dir: Path, args, backend) -> None:
         "chunk_size": output.sidecar.get("chunk_size") or DEFAULT_CHUNK,
         "store": args.store or "auto",
     }
-    command = " ".join(["pursuit", *(sys.argv[1:] if sys.argv and sys.argv[0].endswith("pursuit") else [])]) or None
+    command = shlex.join(["pursuit", *args.argv])
     write_output(output, out_dir, formats=formats, engine=engine, command=command)
     print(f"\nwrote {out_dir} (report: {out_dir / 'report.html'})")
 

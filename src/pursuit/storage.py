@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import csv
 import json
+import zipfile
 from pathlib import Path
 from typing import Any, Iterable
 
@@ -164,19 +165,22 @@ def load_result(path: str | Path) -> MonteCarloResult:
     path = Path(path)
     try:
         with np.load(path, allow_pickle=False) as z:
-            if "meta" not in z.files:
-                raise ValueError(f"{path}: not a pursuit result file (no metadata)")
-            meta = json.loads(str(z["meta"]))
-            if meta.get("format") != FORMAT:
-                raise ValueError(f"{path}: unknown result format {meta.get('format')!r} (expected {FORMAT})")
-            data = {k: z[k] for k in z.files}
-    except (OSError, EOFError) as e:
+            files = list(z.files)
+            data = {k: z[k] for k in files}
+    except (OSError, EOFError, ValueError, zipfile.BadZipFile) as e:
         raise ValueError(f"{path}: cannot read result file ({e})") from None
-    except KeyError as e:
-        raise ValueError(f"{path}: damaged result file (missing {e})") from None
+    if "meta" not in data:
+        raise ValueError(f"{path}: not a pursuit result file (no metadata)")
+    try:
+        meta = json.loads(str(data["meta"]))
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path}: damaged result metadata ({e})") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        got = meta.get("format") if isinstance(meta, dict) else None
+        raise ValueError(f"{path}: unknown result format {got!r} (expected {FORMAT})")
     try:
         return _result_from(meta, "", data, meta.get("config"))
-    except KeyError as e:
+    except (KeyError, TypeError) as e:
         raise ValueError(f"{path}: damaged result file (missing {e})") from None
 
 

@@ -96,6 +96,16 @@ def _figure(folder: Path, name: str) -> tuple[str, bool]:
     )
 
 
+def _backend_text(b: dict[str, Any] | None) -> str | None:
+    if not b:
+        return None
+    where = b.get("backend", "?")
+    if b.get("scheduler"):
+        where += f" at {b['scheduler']}"
+    n = b.get("workers")
+    return f"{where} ({n} worker{'s' if n != 1 else ''})" if n is not None else where
+
+
 def _config_text(sidecar: dict[str, Any]) -> str:
     if sidecar.get("config_text"):
         return sidecar["config_text"]
@@ -126,7 +136,7 @@ def render_report(folder: str | Path) -> tuple[str, list[str]]:
         ("root seed", sidecar.get("seed")),
         ("runs", sidecar.get("runs")),
         ("chunk size", engine.get("chunk_size")),
-        ("backend", ", ".join(f"{k} {v}" for k, v in engine.get("backend", {}).items()) or None),
+        ("backend", _backend_text(engine.get("backend"))),
         ("storage", engine.get("store")),
         ("config file", sidecar.get("config_file")),
         ("reference", sidecar.get("reference")),

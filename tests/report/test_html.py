@@ -1,0 +1,94 @@
+"""The HTML report and index, built from output folders; figure quality checks."""
+
+from __future__ import annotations
+
+import base64
+import re
+
+import pytest
+from matplotlib.figure import Figure
+
+from pursuit.components.experiments import standard_figures, summary_table
+from pursuit.engine import monte_carlo
+from pursuit.experiment import ExperimentOutput, Table
+from pursuit.report.figures import figure_problems
+from pursuit.report.html import render_report, write_index, write_report
+from pursuit.report.output import write_output
+
+from ..engine.helpers import SMALL, small_filters
+
+
+@pytest.fixture(scope="module")
+def result():
+    return monte_carlo(SMALL, small_filters(), 5, 2)
+
+
+def _folder(result, tmp_path, title="Demo <b>&</b>", **kw):
+    tables = [summary_table(result), Table("paper_vs_measured", "Paper", ["filter", "paper", "measured"], [["EKF", 1.0, 0.5]], kind="paper")]
+    out = ExperimentOutput("demo", title, "desc", tables, standard_figures(result, SMALL, {}), {"result": result},
+                           sidecar={"seed": 2, "runs": 5, "config": {"scenario": {"type": "wsn-range"}}, **kw})
+    return write_output(out, tmp_path / "demo", engine={"backend": {"backend": "processes", "workers": 2}, "chunk_size": 3, "store": "full"})
+
+
+def test_report_is_self_contained(result, tmp_path):
+    folder = _folder(result, tmp_path)
+    page = (folder / "report.html").read_text()
+    pngs = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', page)
+    assert len(pngs) == 3
+    for data in pngs:
+        assert base64.b64decode(data).startswith(b"\x89PNG")
+    assert "<script" not in page and "http://" not in page and "https://" not in page
+    assert "Demo &lt;b&gt;&amp;&lt;/b&gt;" in page  # escaped, not markup
+    assert 'class="paper"' in page and "Paper against measured" in page
+    assert "processes (2 workers)" in page and ">2<" in page  # backend and root seed
+    for pkg in ("numpy", "scipy", "matplotlib", "pursuit"):
+        assert f"<th>{pkg}</th>" in page
+    assert 'href="figures/trajectory.pdf"' in page
+
+
+def test_rebuild_equals_original_and_reports_missing_figures(result, tmp_path, capsys):
+    folder = _folder(result, tmp_path)
+    original = (folder / "report.html").read_text()
+    (folder / "report.html").unlink()
+    write_report(folder)
+    assert (folder / "report.html").read_text() == original
+    (folder / "figures" / "trajectory.png").unlink()
+    write_report(folder)
+    assert "trajectory.png is missing" in (folder / "report.html").read_text()
+    assert "trajectory.png is missing" in capsys.readouterr().err
+
+
+def test_render_needs_an_output_folder(tmp_path):
+    with pytest.raises(ValueError, match="no run.json"):
+        render_report(tmp_path)
+
+
+def test_index_links_reports(result, tmp_path):
+    folder = _folder(result, tmp_path)
+    page = write_index(tmp_path, [folder]).read_text()
+    assert 'href="demo/report.html"' in page and "yes" in page  # has paper values
+
+
+def test_standard_figures_are_publication_ready(result):
+    figs = standard_figures(result, SMALL, {})
+    for name, fig in figs.items():
+        assert figure_problems(fig) == [], name
+        for ax in fig.get_axes():
+            assert re.search(r"\(.+\)", ax.get_ylabel()), (name, ax.get_ylabel())  # a unit
+            assert re.search(r"\(.+\)", ax.get_xlabel()), (name, ax.get_xlabel())
+
+
+def test_summary_mode_figures_use_the_kept_runs():
+    summ = monte_carlo(SMALL, small_filters(), 12, 2, store="summary", keep_runs=2, chunk_size=5)
+    figs = standard_figures(summ, SMALL, {"trajectory_run": 7})
+    assert "run 1" in figs["trajectory"].get_axes()[0].get_title()  # clamped to a kept run
+    assert "12 runs" in figs["rmse_position"].get_axes()[0].get_title()
+
+
+def test_figure_problems_finds_unlabelled_axes():
+    fig = Figure()
+    ax = fig.add_subplot()
+    ax.plot([0, 1], label="a")
+    ax.plot([1, 0], label="b")
+    problems = figure_problems(fig)
+    assert any("no x label" in p for p in problems) and any("no legend" in p for p in problems)

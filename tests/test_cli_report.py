@@ -1,0 +1,81 @@
+"""CLI: --workers, --scheduler checks, pursuit report, reproduce all with its index."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+import pursuit
+from pursuit.cli import main
+from pursuit.experiment import list_experiments
+
+EXPERIMENT = Path(__file__).resolve().parents[1] / "experiments" / "wsn-gaussian.toml"
+
+
+def _run(tmp_path, name, *extra):
+    out = tmp_path / name
+    assert main(["run", str(EXPERIMENT), "--runs", "8", "--chunk-size", "3", "--no-progress", "--no-pdf", "-o", str(out), *extra]) == 0
+    return out
+
+
+def test_workers_give_the_serial_files(tmp_path):
+    serial = _run(tmp_path, "serial")
+    two = _run(tmp_path, "two", "--workers", "2")
+    summ = _run(tmp_path, "summ", "--workers", "2", "--store", "summary", "--keep-runs", "2")
+    for name in ("per_step.csv",):
+        assert (serial / name).read_text() == (two / name).read_text() == (summ / name).read_text()
+    drop_wall = lambda t: [r[:-2] for r in t["rows"]]  # noqa: E731  (wall time, runs columns last)
+    tables = [json.loads((d / "run.json").read_text())["tables"]["summary"] for d in (serial, two, summ)]
+    assert drop_wall(tables[0]) == drop_wall(tables[1]) == drop_wall(tables[2])
+    assert json.loads((two / "run.json").read_text())["engine"]["backend"] == {"backend": "processes", "workers": 2}
+    assert pursuit.load(summ).result.store == "summary"
+    assert (serial / "errors.csv").read_text() == (two / "errors.csv").read_text()
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--workers", "0"], "--workers: must be at least 1"),
+        (["--scheduler", "127.0.0.1:8786"], "tcp://HOST:PORT"),
+        (["--keep-runs", "-1"], "--keep-runs"),
+    ],
+)
+def test_bad_engine_arguments_exit_2(tmp_path, capsys, args, message):
+    assert main(["run", str(EXPERIMENT), "--runs", "2", "-o", str(tmp_path / "x"), *args]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+
+
+def test_workers_and_scheduler_exclude_each_other(tmp_path):
+    with pytest.raises(SystemExit):
+        main(["run", str(EXPERIMENT), "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"])
+
+
+def test_report_rebuilds_from_saved_results(tmp_path, capsys):
+    out = _run(tmp_path, "one")
+    original = (out / "report.html").read_text()
+    (out / "report.html").unlink()
+    assert main(["report", str(out)]) == 0
+    assert (out / "report.html").read_text() == original
+
+
+def test_report_errors(tmp_path, capsys):
+    assert main(["report", str(tmp_path / "missing")]) == 2
+    assert "no such folder" in capsys.readouterr().err
+    assert main(["report", str(tmp_path)]) == 2
+    assert "not a pursuit output folder" in capsys.readouterr().err
+
+
+def test_reproduce_all_writes_an_index(tmp_path, capsys):
+    root = tmp_path / "results"
+    assert main(["reproduce", "all", "--runs", "2", "--no-progress", "--no-pdf", "-o", str(root)]) == 0
+    names = list_experiments()
+    index = (root / "index.html").read_text()
+    for name in names:
+        assert f'href="{name}/report.html"' in index
+        assert (root / name / "report.html").is_file()
+    (root / "index.html").unlink()
+    assert main(["report", str(root)]) == 0
+    assert (root / "index.html").read_text() == index

@@ -1,0 +1,146 @@
+"""Results on disk: exact round trips, the tidy tables, pursuit.load."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import pursuit
+from pursuit.engine import monte_carlo
+from pursuit.experiment import ExperimentOutput, Table
+from pursuit.report.output import write_output
+from pursuit.storage import load_result, save_result, write_errors_csv, write_per_step_csv
+
+from .engine.helpers import SMALL, assert_same_result, small_filters
+
+RUNS, SEED = 9, 4
+
+
+@pytest.fixture(scope="module")
+def full():
+    return monte_carlo(SMALL, small_filters(), RUNS, SEED, config={"note": "x"})
+
+
+@pytest.fixture(scope="module")
+def summary():
+    return monte_carlo(SMALL, small_filters(), RUNS, SEED, store="summary", keep_runs=2, chunk_size=4)
+
+
+@pytest.mark.parametrize("which", ["full", "summary"])
+def test_result_round_trip_is_exact(which, full, summary, tmp_path):
+    result = {"full": full, "summary": summary}[which]
+    back = load_result(save_result(result, tmp_path / "r.npz"))
+    assert back.store == which and back.runs == RUNS
+    assert_same_result(result, back)
+    assert [r["wall_time_s"] for r in back.summary()] == [r["wall_time_s"] for r in result.summary()]
+    if which == "summary":
+        assert_same_result(result.stored(), back.stored())
+
+
+def test_load_result_rejects_other_files(tmp_path):
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, x=np.zeros(3))
+    with pytest.raises(ValueError, match="not a pursuit result"):
+        load_result(bad)
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="junk.npz"):
+        load_result(tmp_path / "junk.npz")
+
+
+def _rows(path: Path) -> list[dict[str, str]]:
+    with path.open() as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_errors_csv_is_tidy_and_exact(full, tmp_path):
+    n = write_errors_csv(tmp_path / "e.csv", "exp", {"result": full})
+    rows = _rows(tmp_path / "e.csv")
+    assert n == len(rows) == len(full.filters) * RUNS * full.steps
+    assert list(rows[0])[:6] == ["experiment", "result", "filter", "run", "step", "time"]
+    for row in rows[:: 37]:
+        f, run, step = row["filter"], int(row["run"]), int(row["step"])
+        e = full.filters[f].estimates[step - 1, run] - full.truth[step - 1, run]
+        assert float(row["err_x"]) == e[0] and float(row["err_vy"]) == e[3]
+        assert float(row["err_position"]) == np.sqrt(e[0] ** 2 + e[2] ** 2)
+        assert float(row["nees"]) == full.nees(f)[step - 1, run]
+        assert float(row["nis"]) == full.filters[f].info["nis"][step - 1, run]
+
+
+def test_errors_csv_of_a_summary_lists_only_kept_runs(summary, tmp_path):
+    write_errors_csv(tmp_path / "e.csv", "exp", {"result": summary})
+    runs = {int(r["run"]) for r in _rows(tmp_path / "e.csv")}
+    assert runs == {0, 1}
+
+
+def test_per_step_csv_equals_the_summaries(full, summary, tmp_path):
+    write_per_step_csv(tmp_path / "a.csv", "exp", {"result": full})
+    write_per_step_csv(tmp_path / "b.csv", "exp", {"result": summary})
+    assert (tmp_path / "a.csv").read_text() == (tmp_path / "b.csv").read_text()
+    rows = [r for r in _rows(tmp_path / "a.csv") if r["filter"] == "EKF"]
+    assert [float(r["rmse_position"]) for r in rows] == full.rmse_per_step("EKF").tolist()
+    assert [float(r["anis"]) for r in rows] == full.anis("EKF").tolist()
+
+
+def _output(result) -> ExperimentOutput:
+    from pursuit.components.experiments import standard_figures, summary_table
+
+    return ExperimentOutput(
+        "demo", "Demo", "A demo.", [summary_table(result)], standard_figures(result, SMALL, {}), results={"result": result}
+    )
+
+
+def test_load_gives_back_the_result_object(full, tmp_path):
+    out = write_output(_output(full), tmp_path / "demo")
+    loaded = pursuit.load(out)
+    assert loaded.name == "demo" and loaded.title == "Demo"
+    assert_same_result(full, loaded.result)
+    assert loaded.tables[0].rows == _output(full).tables[0].rows
+    assert all(p.is_file() for p in loaded.figures.values())
+    assert {p.suffix for p in (out / "figures").iterdir()} == {".png", ".pdf"}
+    for name in ("summary.csv", "errors.csv", "per_step.csv", "run.json", "report.html", "results/result.npz"):
+        assert (out / name).is_file(), name
+
+
+def test_load_handles_several_and_other_results(full, tmp_path):
+    out = _output(full)
+    out.results = {"a b": full, "curve": np.arange(3.0), "meta": {"k": [1, 2]}, "obj": object()}
+    folder = write_output(out, tmp_path / "multi")
+    loaded = pursuit.load(folder)
+    assert set(loaded.results) == {"a b", "curve", "meta"}
+    assert np.array_equal(loaded.results["curve"], np.arange(3.0))
+    assert loaded.results["meta"] == {"k": [1, 2]}
+    assert loaded.sidecar["results"]["obj"]["file"] is None
+    with pytest.raises(ValueError, match="3 results"):
+        loaded.result
+
+
+def test_load_errors_name_the_problem(full, tmp_path):
+    with pytest.raises(ValueError, match="no run.json"):
+        pursuit.load(tmp_path)
+    folder = write_output(_output(full), tmp_path / "demo")
+    (folder / "results" / "result.npz").unlink()
+    with pytest.raises(ValueError, match="result.npz: listed in run.json but missing"):
+        pursuit.load(folder)
+
+
+def test_write_output_is_all_or_nothing(full, tmp_path):
+    class Broken:
+        def savefig(self, *a, **k):
+            raise RuntimeError("disk full")
+
+    out = _output(full)
+    out.figures = {"bad": Broken()}
+    with pytest.raises(RuntimeError, match="disk full"):
+        write_output(out, tmp_path / "x")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_paper_tables_keep_their_kind(full, tmp_path):
+    out = _output(full)
+    out.tables.append(Table("paper_vs_measured", "P", ["filter", "paper", "measured"], [["EKF", 1.0, 0.9]], "n", "paper"))
+    loaded = pursuit.load(write_output(out, tmp_path / "p"))
+    assert [t.kind for t in loaded.tables] == ["result", "paper"]
+    assert loaded.tables[1].notes == "n"
