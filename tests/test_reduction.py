@@ -51,3 +51,21 @@ def test_missing_and_duplicate_runs_are_errors():
 def test_run_sum_along_other_axis():
     x = np.arange(24.0).reshape(2, 12)
     assert np.array_equal(run_sum(x, axis=1), x.sum(axis=1))
+
+
+def test_accumulator_folds_chunks_in_any_order_with_little_memory():
+    from pursuit.reduction import RunSumAccumulator
+
+    rng = np.random.default_rng(3)
+    values = rng.standard_normal((1000, 2)) * 10.0 ** rng.integers(-8, 9, size=(1000, 1))
+    parts = _chunked(values, range(37, 1000, 37))
+    order = rng.permutation(len(parts))
+    acc = RunSumAccumulator(1000)
+    for i in order:
+        acc.add(parts[i])
+    assert np.array_equal(acc.result(), run_sum(values))
+    assert len(acc.pool) <= 10  # the canonical top blocks of 1000 runs: 512+256+128+64+32+8
+    in_order = RunSumAccumulator(1000)
+    for p in parts:
+        in_order.add(p)
+        assert len(in_order.pool) <= 2 * 10

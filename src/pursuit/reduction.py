@@ -37,6 +37,7 @@ __all__ = [
     "Blocks",
     "block_sums",
     "merge_blocks",
+    "RunSumAccumulator",
     "run_sum",
     "component_groups",
     "group_key",
@@ -44,6 +45,7 @@ __all__ = [
     "FilterStatistics",
     "filter_statistics",
     "merge_statistics",
+    "StatisticsAccumulator",
 ]
 
 Blocks = dict[tuple[int, int], np.ndarray]
@@ -124,6 +126,39 @@ def merge_blocks(parts: Iterable[Blocks], total: int) -> np.ndarray:
     for span in spans[1:]:
         acc = acc + get(*span)
     return acc
+
+
+class RunSumAccumulator:
+    """The canonical sum over runs ``[0, total)``, fed chunk by chunk in any order.
+
+    Sibling blocks are added into their parent as soon as both are present
+    (exactly as :func:`merge_blocks` would add them), so the memory held is
+    a few blocks per level — about ``log2(total)`` — not one per chunk.
+    """
+
+    def __init__(self, total: int):
+        self.total = int(total)
+        self.pool: Blocks = {}
+
+    def add(self, blocks: Blocks) -> None:
+        """Take the block sums of one chunk (:func:`block_sums`)."""
+        for (level, index), value in blocks.items():
+            while True:
+                if (level, index) in self.pool:
+                    raise ValueError(f"runs {index << level}..{((index + 1) << level) - 1} were reduced twice")
+                sibling = index ^ 1
+                parent_end = ((index >> 1) + 1) << (level + 1)
+                if (level, sibling) in self.pool and parent_end <= self.total:
+                    other = self.pool.pop((level, sibling))
+                    value = other + value if sibling < index else value + other  # left + right
+                    level, index = level + 1, index >> 1
+                    continue
+                self.pool[(level, index)] = value
+                break
+
+    def result(self) -> np.ndarray:
+        """The canonical sum (raises if a run is missing)."""
+        return merge_blocks([self.pool], self.total)
 
 
 def run_sum(values: np.ndarray, axis: int = 0) -> np.ndarray:
@@ -273,21 +308,51 @@ def filter_statistics(
     return out
 
 
+class StatisticsAccumulator:
+    """Folds the partial statistics of one filter's chunks, in any order, into :class:`FilterStatistics`.
+
+    Holds a few blocks per quantity (see :class:`RunSumAccumulator`) and the
+    per-run values (a few floats per run), so its memory does not grow with
+    the number of chunks.
+    """
+
+    def __init__(self, runs: int, steps: int):
+        self.runs, self.steps = int(runs), int(steps)
+        self.sums: dict[str, RunSumAccumulator] = {}
+        self.per_run: dict[str, dict[int, np.ndarray]] = {}
+        self.spans: list[tuple[int, int]] = []
+
+    def add(self, part: PartialStatistics) -> None:
+        """Fold one chunk in."""
+        if not self.spans:
+            self.sums = {name: RunSumAccumulator(self.runs) for name in part.sums}
+            self.per_run = {name: {} for name in part.per_run}
+        elif set(part.sums) != set(self.sums) or set(part.per_run) != set(self.per_run):
+            raise ValueError(f"chunk {part.start}..{part.stop - 1} reduced different quantities")
+        self.spans.append((part.start, part.stop))
+        for name, blocks in part.sums.items():
+            self.sums[name].add(blocks)
+        for name, values in part.per_run.items():
+            self.per_run[name][part.start] = values
+
+    def result(self) -> FilterStatistics:
+        """The totals over all runs; raises if runs are missing or were reduced twice."""
+        pos = 0
+        for start, stop in sorted(self.spans):
+            if start != pos:
+                what = "reduced twice" if start < pos else "missing"
+                raise ValueError(f"runs {min(start, pos)}..{max(start, pos) - 1} are {what}")
+            pos = stop
+        if pos != self.runs:
+            raise ValueError(f"runs {pos}..{self.runs - 1} are missing" if pos < self.runs else f"got runs beyond {self.runs - 1}")
+        sums = {name: acc.result() for name, acc in self.sums.items()}
+        per_run = {name: np.concatenate([chunks[s] for s in sorted(chunks)]) for name, chunks in self.per_run.items()}
+        return FilterStatistics(runs=self.runs, steps=self.steps, sums=sums, per_run=per_run)
+
+
 def merge_statistics(parts: Sequence[PartialStatistics], runs: int, steps: int) -> FilterStatistics:
     """Assemble the partial statistics of every chunk (any order) into totals over ``runs``."""
-    parts = sorted(parts, key=lambda p: p.start)
-    pos = 0
-    for p in parts:
-        if p.start != pos:
-            what = "reduced twice" if p.start < pos else "missing"
-            raise ValueError(f"runs {min(p.start, pos)}..{max(p.start, pos) - 1} are {what}")
-        pos = p.stop
-    if pos != runs:
-        raise ValueError(f"runs {pos}..{runs - 1} are missing" if pos < runs else f"got runs beyond {runs - 1}")
-    names = list(parts[0].sums) if parts else []
-    for p in parts[1:]:
-        if list(p.sums) != names or list(p.per_run) != list(parts[0].per_run):
-            raise ValueError(f"chunk {p.start}..{p.stop - 1} reduced different quantities")
-    sums = {name: merge_blocks([p.sums[name] for p in parts], runs) for name in names}
-    per_run = {name: np.concatenate([p.per_run[name] for p in parts]) for name in parts[0].per_run}
-    return FilterStatistics(runs=runs, steps=steps, sums=sums, per_run=per_run)
+    acc = StatisticsAccumulator(runs, steps)
+    for part in parts:
+        acc.add(part)
+    return acc.result()

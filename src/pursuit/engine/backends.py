@@ -2,7 +2,9 @@
 
 A backend maps a *chunk task* (a picklable callable ``task(start, stop)``
 that computes runs ``[start, stop)``) over the chunks and hands each result
-back as soon as it is finished.  Because a chunk's result is a pure function
+to the engine (``on_result(span, result)``) as soon as it is finished, once
+per chunk; the engine folds it in and drops it, so the backend holds no
+results.  Because a chunk's result is a pure function
 of the scenario, the filters, the root seed and the run range, where it is
 computed does not change a bit of it.
 
@@ -50,7 +52,7 @@ __all__ = [
 ]
 
 Span = tuple[int, int]
-OnDone = Callable[[Span], None]
+OnResult = Callable[[Span, Any], None]
 
 
 class WorkerLost(RuntimeError):
@@ -60,10 +62,8 @@ class WorkerLost(RuntimeError):
 class Backend(Protocol):
     """What the engine needs from a backend."""
 
-    def map_chunks(
-        self, task: Callable[..., Any], spans: Sequence[Span], on_done: OnDone | None = None, **serial_kwargs: Any
-    ) -> dict[Span, Any]:
-        """Compute ``task(start, stop)`` for every span; call ``on_done(span)`` as each finishes."""
+    def map_chunks(self, task: Callable[..., Any], spans: Sequence[Span], on_result: OnResult, **serial_kwargs: Any) -> None:
+        """Compute ``task(start, stop)`` for every span; call ``on_result(span, result)`` once per span as each finishes."""
 
     def describe(self) -> dict[str, Any]:
         """A JSON-able description for the output's sidecar."""
@@ -80,13 +80,9 @@ class Serial:
     backends cannot call back into this process mid-chunk).
     """
 
-    def map_chunks(self, task, spans, on_done=None, **serial_kwargs) -> dict[Span, Any]:
-        out: dict[Span, Any] = {}
+    def map_chunks(self, task, spans, on_result, **serial_kwargs) -> None:
         for span in spans:
-            out[span] = task(*span, **serial_kwargs)
-            if on_done is not None:
-                on_done(span)
-        return out
+            on_result(span, task(*span, **serial_kwargs))
 
     def describe(self) -> dict[str, Any]:
         return {"backend": "serial", "workers": 1}
@@ -142,56 +138,49 @@ class LocalProcesses:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
 
-    def map_chunks(self, task, spans, on_done=None, **serial_kwargs) -> dict[Span, Any]:
-        out: dict[Span, Any] = {}
+    def map_chunks(self, task, spans, on_result, **serial_kwargs) -> None:
+        finished: set[Span] = set()
         todo = [tuple(s) for s in spans]
         breaks = 0
+
+        def deliver(fut: Future, span: Span) -> None:
+            if span not in finished:  # once per chunk, whatever happened to the pool
+                finished.add(span)
+                on_result(span, fut.result())
+
         while todo:
             pool = self._executor()
             futures: dict[Future, Span] = {pool.submit(task, *span): span for span in todo}
             broken = False
             try:
                 pending = set(futures)
-                while pending:
+                while pending and not broken:
                     done, pending = wait(pending, return_when=FIRST_COMPLETED)
                     for fut in done:
                         exc = fut.exception()
                         if isinstance(exc, BrokenProcessPool):
                             broken = True
-                            continue
-                        if exc is not None:
+                        elif exc is not None:
                             raise exc
-                        span = futures[fut]
-                        out[span] = fut.result()
-                        if on_done is not None:
-                            on_done(span)
-                    if broken:
-                        break
+                        else:
+                            deliver(fut, futures[fut])
             except BaseException:
                 for fut in futures:
                     fut.cancel()
                 raise
-            if broken:
-                # Keep what finished before the break; recompute the rest.
-                for fut, span in futures.items():
-                    if span not in out and fut.done() and not fut.cancelled() and fut.exception() is None:
-                        out[span] = fut.result()
-                        if on_done is not None:
-                            on_done(span)
-                self._discard()
-                breaks += 1
-                self.restarts += 1
-                todo = [s for s in todo if s not in out]
-                if breaks > self.max_restarts:
-                    raise WorkerLost(
-                        f"local worker processes died {breaks} times; {len(todo)} chunk(s) left uncomputed"
-                    )
-                warnings.warn(
-                    f"a worker process died; computing {len(todo)} chunk(s) again", RuntimeWarning, stacklevel=2
-                )
-            else:
-                todo = []
-        return out
+            if not broken:
+                return
+            # Keep what finished before the break; compute the rest again on a new pool.
+            for fut, span in futures.items():
+                if fut.done() and not fut.cancelled() and fut.exception() is None:
+                    deliver(fut, span)
+            self._discard()
+            breaks += 1
+            self.restarts += 1
+            todo = [s for s in todo if s not in finished]
+            if breaks > self.max_restarts:
+                raise WorkerLost(f"local worker processes died {breaks} times; {len(todo)} chunk(s) left uncomputed")
+            warnings.warn(f"a worker process died; computing {len(todo)} chunk(s) again", RuntimeWarning, stacklevel=2)
 
     def describe(self) -> dict[str, Any]:
         return {"backend": "processes", "workers": self.workers}
@@ -258,30 +247,33 @@ class Dask:
                 raise ConnectionError(f"--scheduler {address}: cannot connect ({e})") from None
         self.client = client
 
-    def map_chunks(self, task, spans, on_done=None, **serial_kwargs) -> dict[Span, Any]:
+    def map_chunks(self, task, spans, on_result, **serial_kwargs) -> None:
         distributed = _import_distributed()
         token = uuid.uuid4().hex[:12]
         futures = {
             self.client.submit(task, s, e, key=f"pursuit-chunk-{token}-{s}-{e}", pure=False): (s, e) for s, e in spans
         }
-        out: dict[Span, Any] = {}
+        finished: set[Span] = set()
         try:
             for fut in distributed.as_completed(list(futures), loop=self.client.loop, timeout=self.wait_timeout):
                 span = futures[fut]
-                out[span] = fut.result()
+                result = fut.result()
                 fut.release()
-                if on_done is not None:
-                    on_done(span)
+                if span not in finished:
+                    finished.add(span)
+                    on_result(span, result)
         except distributed.KilledWorker as e:
             raise WorkerLost(f"Dask workers died while computing a chunk too often: {e}") from None
         finally:
             for fut in futures:
                 if not fut.done():
                     fut.cancel()
-        return out
 
     def describe(self) -> dict[str, Any]:
-        info = self.client.scheduler_info() if hasattr(self.client, "scheduler_info") else {}
+        try:
+            info = self.client.scheduler_info(n_workers=-1)  # newer clients list only 5 workers by default
+        except TypeError:
+            info = self.client.scheduler_info()
         workers = info.get("workers", {})
         return {
             "backend": "dask",

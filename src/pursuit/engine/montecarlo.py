@@ -25,7 +25,7 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from .._validation import positive_int
-from ..reduction import PartialStatistics, component_groups, filter_statistics, merge_statistics
+from ..reduction import PartialStatistics, StatisticsAccumulator, component_groups, filter_statistics
 from ..results import STORE_MODES, FilterResult, MonteCarloResult
 from ..rng import run_streams
 from .backends import Serial, current_options, make_backend
@@ -40,6 +40,7 @@ __all__ = [
     "ChunkTask",
     "combine_chunks",
     "combine_summaries",
+    "SummaryCollector",
     "DEFAULT_CHUNK",
     "DEFAULT_KEEP_RUNS",
     "AUTO_FULL_LIMIT",
@@ -223,31 +224,61 @@ def combine_chunks(
     )
 
 
+class SummaryCollector:
+    """Folds reduced chunks into one summary-mode result as they arrive, in any order.
+
+    Memory: a few blocks per reduced quantity, a few floats per run and the
+    kept example runs; not the chunks themselves.
+    """
+
+    def __init__(self, scenario: Any, filters: Sequence[Any], seed: int, config: dict | None, runs: int):
+        self.scenario, self.filters, self.seed, self.config, self.runs = scenario, list(filters), int(seed), config, runs
+        self.stats: dict[str, StatisticsAccumulator] = {}
+        self.walls = {f.name: 0.0 for f in self.filters}
+        self.examples: list[ChunkResult] = []
+        self.spans: list[tuple[int, int]] = []
+        self.times: np.ndarray | None = None
+
+    def add(self, part: ChunkSummary) -> None:
+        """Fold one reduced chunk in (then the caller can drop it)."""
+        if self.times is None:
+            self.times = part.times
+            self.stats = {f.name: StatisticsAccumulator(self.runs, len(part.times)) for f in self.filters}
+        self.spans.append((part.start, part.stop))
+        for name, acc in self.stats.items():
+            acc.add(part.stats[name])
+            self.walls[name] += part.wall_times[name]
+        if part.example is not None:
+            self.examples.append(part.example)
+
+    def result(self) -> MonteCarloResult:
+        """The summary-mode :class:`MonteCarloResult`."""
+        _check_tiling(self.spans, self.runs)
+        stats = {name: acc.result() for name, acc in self.stats.items()}
+        results = {name: FilterResult(name, None, None, {}, float(self.walls[name])) for name in self.stats}
+        ex = combine_chunks(self.examples, self.scenario, self.filters, self.seed, None) if self.examples else None
+        return MonteCarloResult(
+            seed=self.seed,
+            times=self.times,
+            truth=None,
+            measurements=None,
+            filters=results,
+            config=self.config,
+            statistics=stats,
+            total_runs=self.runs,
+            examples=ex,
+            **_result_fields(self.scenario),
+        )
+
+
 def combine_summaries(
     parts: Sequence[ChunkSummary], scenario: Any, filters: Sequence[Any], seed: int, config: dict | None, runs: int
 ) -> MonteCarloResult:
     """Merge reduced chunks into one summary-mode :class:`MonteCarloResult`."""
-    parts = sorted(parts, key=lambda p: p.start)
-    _check_tiling([(p.start, p.stop) for p in parts], runs)
-    steps = len(parts[0].times)
-    stats = {f.name: merge_statistics([p.stats[f.name] for p in parts], runs, steps) for f in filters}
-    results = {
-        f.name: FilterResult(f.name, None, None, {}, float(sum(p.wall_times[f.name] for p in parts))) for f in filters
-    }
-    examples = [p.example for p in parts if p.example is not None]
-    ex = combine_chunks(examples, scenario, filters, seed, None) if examples else None
-    return MonteCarloResult(
-        seed=int(seed),
-        times=parts[0].times,
-        truth=None,
-        measurements=None,
-        filters=results,
-        config=config,
-        statistics=stats,
-        total_runs=runs,
-        examples=ex,
-        **_result_fields(scenario),
-    )
+    collector = SummaryCollector(scenario, filters, seed, config, runs)
+    for part in parts:
+        collector.add(part)
+    return collector.result()
 
 
 def validate_filters(filters: Sequence[Any]) -> list[Any]:
@@ -378,18 +409,31 @@ def monte_carlo(
         if callable(progress):
             progress(bar.done, bar.total)
 
+    collector = SummaryCollector(scenario, filters, int(seed), config, runs) if store == "summary" else None
+    chunks: dict[tuple[int, int], ChunkResult] = {}
+
+    def on_result(span: tuple[int, int], part: Any) -> None:
+        if span in chunks or (collector is not None and span in collector.spans):
+            raise RuntimeError(f"the backend returned runs {span[0]}..{span[1] - 1} twice")
+        if collector is not None:
+            collector.add(part)  # folded in and dropped: memory stays bounded by the chunk size
+        else:
+            chunks[span] = part
+        if not isinstance(backend, Serial):
+            advance(len(filters))
+
     try:
         if isinstance(backend, Serial):
-            parts = backend.map_chunks(task, spans, None, on_filter_done=lambda: advance(1))
+            backend.map_chunks(task, spans, on_result, on_filter_done=lambda: advance(1))
         else:
-            parts = backend.map_chunks(task, spans, lambda span: advance(len(filters)))
+            backend.map_chunks(task, spans, on_result)
     finally:
         bar.close()
         if owned is not None:
             owned.close()
-    missing = set(spans) - set(parts)
-    if missing or len(parts) != len(spans):
-        raise RuntimeError(f"the backend returned {len(parts)} chunk(s) for {len(spans)}; missing {sorted(missing)}")
-    if store == "full":
-        return combine_chunks([parts[s] for s in spans], scenario, filters, int(seed), config)
-    return combine_summaries([parts[s] for s in spans], scenario, filters, int(seed), config, runs)
+    if collector is not None:
+        return collector.result()
+    missing = sorted(set(spans) - set(chunks))
+    if missing:
+        raise RuntimeError(f"the backend returned no result for runs {missing[0][0]}..{missing[-1][1] - 1}")
+    return combine_chunks([chunks[s] for s in spans], scenario, filters, int(seed), config)
