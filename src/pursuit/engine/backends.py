@@ -163,7 +163,7 @@ class LocalProcesses:
                         elif exc is not None:
                             raise exc
                         else:
-                            deliver(fut, futures[fut])
+                            deliver(fut, futures.pop(fut))  # drop our reference: the result is the engine's now
             except BaseException:
                 for fut in futures:
                     fut.cancel()
@@ -259,13 +259,15 @@ class Dask:
                 span = futures[fut]
                 result = fut.result()
                 fut.release()
+                del futures[fut]
                 if span not in finished:
                     finished.add(span)
                     on_result(span, result)
+                del result
         except distributed.KilledWorker as e:
             raise WorkerLost(f"Dask workers died while computing a chunk too often: {e}") from None
         finally:
-            for fut in futures:
+            for fut in list(futures):
                 if not fut.done():
                     fut.cancel()
 
