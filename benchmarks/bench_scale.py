@@ -88,14 +88,19 @@ def _measure(name: str, runs: int, workers: int, store: str, chunk: int) -> dict
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
-def main(argv: list[str] | None = None) -> list[dict]:
-    """Run the benchmark, print a Markdown table, return the measurements."""
+def main(quick: bool = False, argv: list[str] | None = None) -> list[dict]:
+    """Run the benchmark, print a Markdown table, return the measurements.
+
+    ``benchmarks/run.py`` calls ``main(quick=...)``; the command line takes
+    the same options (``--quick``, ``--chunk``, ``--json``).
+    """
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true", help="small sizes, for a smoke test")
     p.add_argument("--chunk", type=int, default=250, help="runs per chunk (default 250)")
     p.add_argument("--json", type=Path, help="also write the measurements here")
     p.add_argument("--child", nargs=5, help=argparse.SUPPRESS)
-    args = p.parse_args(argv)
+    args = p.parse_args([] if argv is None else argv)
+    args.quick = args.quick or quick
     if args.child:
         name, runs, workers, store, chunk = args.child
         print(json.dumps(child(name, int(runs), int(workers), store, int(chunk))))
@@ -127,4 +132,4 @@ def main(argv: list[str] | None = None) -> list[dict]:
 
 
 if __name__ == "__main__":
-    main()
+    main(argv=sys.argv[1:])

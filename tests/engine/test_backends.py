@@ -118,3 +118,20 @@ def test_make_backend_checks_its_arguments():
         make_backend(scheduler="127.0.0.1:8786")
     with pytest.raises(ValueError, match="workers"):
         LocalProcesses(0)
+
+
+def test_progress_bar_draws_as_chunks_finish(pool, monkeypatch):
+    import io
+    import re
+    import sys
+
+    class FakeTerminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    term = FakeTerminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    monte_carlo(Slow(SMALL, 0.3), small_filters(), 8, SEED, chunk_size=2, backend=pool, progress=True)
+    shown = [float(p) for p in re.findall(r"(\d+\.\d)%", term.getvalue())]
+    assert shown[0] == 0.0 and shown[-1] == 100.0
+    assert shown == sorted(shown) and len({p for p in shown if 0 < p < 100}) >= 2  # it moved in between
