@@ -49,6 +49,7 @@ __all__ = [
     "current_options",
     "EngineOptions",
     "WorkerLost",
+    "WorkerRestart",
 ]
 
 Span = tuple[int, int]
@@ -57,6 +58,10 @@ OnResult = Callable[[Span, Any], None]
 
 class WorkerLost(RuntimeError):
     """Workers kept dying: a chunk could not be computed within the allowed restarts."""
+
+
+class WorkerRestart(UserWarning):
+    """A local worker process died; its chunks are being computed again."""
 
 
 class Backend(Protocol):
@@ -180,7 +185,7 @@ class LocalProcesses:
             todo = [s for s in todo if s not in finished]
             if breaks > self.max_restarts:
                 raise WorkerLost(f"local worker processes died {breaks} times; {len(todo)} chunk(s) left uncomputed")
-            warnings.warn(f"a worker process died; computing {len(todo)} chunk(s) again", RuntimeWarning, stacklevel=2)
+            warnings.warn(f"a worker process died; computing {len(todo)} chunk(s) again", WorkerRestart, stacklevel=2)
 
     def describe(self) -> dict[str, Any]:
         return {"backend": "processes", "workers": self.workers}
