@@ -28,7 +28,11 @@ def pool():
         yield backend
 
 
-PAIRS = [(c, LinearCV(ndim=2, steps=5)) for c in CASES] + [(c, WSNRange(steps=5)) for c in NONLINEAR_CASES]
+PAIRS = (
+    [(c, LinearCV(ndim=2, steps=5)) for c in CASES if c.scenario is None]
+    + [(c, WSNRange(steps=5)) for c in NONLINEAR_CASES]
+    + [(c, c.scenario) for c in CASES if c.scenario is not None]
+)
 
 
 @pytest.mark.parametrize("case, scenario", PAIRS, ids=[f"{c.id}-{type(s).__name__}" for c, s in PAIRS])

@@ -10,7 +10,7 @@ from matplotlib.figure import Figure
 
 from pursuit.components.experiments import standard_figures, summary_table
 from pursuit.engine import monte_carlo
-from pursuit.experiment import ExperimentOutput, Table
+from pursuit.experiment import ExperimentOutput, Table, find_experiment, list_experiments, load_experiment
 from pursuit.report.figures import figure_problems
 from pursuit.report.html import render_report, write_index, write_report
 from pursuit.report.output import write_output
@@ -91,4 +91,31 @@ def test_figure_problems_finds_unlabelled_axes():
     ax.plot([0, 1], label="a")
     ax.plot([1, 0], label="b")
     problems = figure_problems(fig)
-    assert any("no x label" in p for p in problems) and any("no legend" in p for p in problems)
+    assert any("no x label" in p for p in problems) and any("in no legend" in p for p in problems)
+    ax.legend()
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("x (m)")
+    assert figure_problems(fig) == []
+
+
+def test_figure_problems_accepts_stacked_panels_with_one_legend():
+    fig = Figure()
+    top, bottom = fig.subplots(2, 1, sharex=True)
+    for ax, unit in ((top, "m"), (bottom, "m/s")):
+        ax.plot([0, 1], label="EKF")
+        ax.plot([1, 0], label="UKF")
+        ax.set_ylabel(f"RMSE ({unit})")
+    bottom.set_xlabel("time (s)")
+    problems = figure_problems(fig)
+    assert len(problems) == 2 and all("in no legend" in p for p in problems)
+    top.legend()
+    assert figure_problems(fig) == []
+
+
+@pytest.mark.parametrize("name", list_experiments())
+def test_every_bundled_experiment_has_publication_ready_figures(name):
+    """Labelled axes (with units where the quantity has one) and legends, for every kind's figures."""
+    output = load_experiment(find_experiment(name)).run(runs=2)
+    assert output.figures
+    for fig_name, fig in output.figures.items():
+        assert figure_problems(fig) == [], (name, fig_name)

@@ -146,7 +146,8 @@ class ConditionsPlan:
         results: dict[str, MonteCarloResult] = {}
         for cond in self.conditions:
             results[cond.name] = monte_carlo(
-                cond.scenario, cond.filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections
+                cond.scenario, cond.filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections,
+                store="full",  # the paired per-run statistics need every run's errors
             )
         tables = [self._rmse_table(results), self._improvement_table(results)]
         if self.paper:

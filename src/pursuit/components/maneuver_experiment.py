@@ -284,7 +284,8 @@ class ManeuverPlan:
     def run(self, *, runs: int, seed: int, progress: bool = False, chunk_size: int | None = None) -> ExperimentOutput:
         """Run the comparison and assemble tables and figures."""
         result = monte_carlo(
-            self.scenario, self.filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections
+            self.scenario, self.filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections,
+            store="full",  # per-axis errors, detections and mode probabilities need every run's arrays
         )
         axes = _axes(self.scenario)
         maneuvering = _maneuvering(self.scenario, result)

@@ -164,10 +164,15 @@ def fading_over_time(
     for ax, (panel, result) in zip(axes, panels):
         names = list(filters) if filters is not None else result.filter_names
         for name in names:
-            info = result.filters[name].info
-            if "fading" not in info:
+            if "fading" not in result.info_keys(name):
                 continue
-            ax.plot(result.times, reduce(info["fading"], axis=1), label=name, linewidth=1.3)
+            if statistic == "mean":  # from the reduced statistics: works in summary mode too
+                values = result.info_mean(name, "fading")
+            else:
+                if result.store != "full":
+                    raise ValueError("statistic='median' needs every run's fading factors (store='full')")
+                values = reduce(result.filters[name].info["fading"], axis=1)
+            ax.plot(result.times, values, label=name, linewidth=1.3)
         if log:
             ax.set_yscale("log")
         ax.set_ylabel(f"{statistic} λ")
@@ -188,20 +193,27 @@ def _labelled(name: str, unit: str) -> str:
 def figure_problems(fig: Figure) -> list[str]:
     """What keeps a figure from being publication-ready: unlabelled axes, a missing legend.
 
-    Every axes that shows data needs an x and a y label; one that shows more
-    than one labelled line or collection needs a legend.  Returns an empty
-    list for a good figure.
+    Every axes that shows data needs a y label and an x label (an axes whose
+    x axis is shared with a labelled one, as in stacked panels, or a figure
+    with a common x label, is fine); the series of an axes that shows more
+    than one labelled series must appear in a legend (its own, another
+    panel's or the figure's).  Returns an empty list for a good figure.
     """
     problems = []
-    for n, ax in enumerate(fig.get_axes()):
+    axes = fig.get_axes()
+    legends = [leg for ax in axes if (leg := ax.get_legend()) is not None] + list(fig.legends)
+    in_legend = {t.get_text() for leg in legends for t in leg.get_texts()}
+    common_x = bool(getattr(fig, "_supxlabel", None) and fig._supxlabel.get_text().strip())
+    for n, ax in enumerate(axes):
         if not (ax.lines or ax.collections or ax.patches or ax.images):
             continue
         where = f"axes {n} ({ax.get_title() or 'untitled'})"
-        if not ax.get_xlabel().strip():
+        shared = [a for a in ax.get_shared_x_axes().get_siblings(ax) if a is not ax]
+        if not ax.get_xlabel().strip() and not common_x and not any(a.get_xlabel().strip() for a in shared):
             problems.append(f"{where}: no x label")
         if not ax.get_ylabel().strip():
             problems.append(f"{where}: no y label")
-        labelled = [a for a in (*ax.lines, *ax.collections) if not a.get_label().startswith("_")]
-        if len(labelled) > 1 and ax.get_legend() is None:
-            problems.append(f"{where}: {len(labelled)} labelled series but no legend")
+        labels = {a.get_label() for a in (*ax.lines, *ax.collections) if not a.get_label().startswith("_")}
+        if len(labels) > 1 and not labels <= in_legend:
+            problems.append(f"{where}: series {sorted(labels - in_legend)} are in no legend")
     return problems
