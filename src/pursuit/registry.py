@@ -33,6 +33,8 @@ _COMPONENT_MODULES = (
     "pursuit.components.maneuver_experiment",
     "pursuit.components.underwater",
     "pursuit.components.conditions",
+    "pursuit.components.particle",
+    "pursuit.components.sweep",
 )
 
 

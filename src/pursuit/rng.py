@@ -67,7 +67,8 @@ class RunStreams:
     def _fill(self, size, draw: Callable[[np.random.Generator, np.ndarray], None]) -> np.ndarray:
         size = self._check(size)
         out = np.empty(size, dtype=float)
-        for g, row in zip(self.generators, out):
+        # a (runs,)-shaped draw fills one-element rows (a 0-d row is not writable)
+        for g, row in zip(self.generators, out.reshape(size[0], -1)):
             draw(g, row)
         return out
 

@@ -1,0 +1,125 @@
+"""Figures of particle-filter experiments: errors of one run, particle clouds, metrics against a swept value."""
+
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from ..results import MonteCarloResult
+
+__all__ = ["abs_error_over_time", "particle_clouds", "metric_against_value"]
+
+
+def abs_error_over_time(
+    result: MonteCarloResult, run: int = 0, component: int = 0, *, filters: Sequence[str] | None = None, title: str | None = None
+) -> Figure:
+    """|x̂ − x| of one state component against time, one run, each filter."""
+    if not 0 <= run < result.runs:
+        raise ValueError(f"run: must lie in [0, {result.runs - 1}], got {run}")
+    fig = Figure(figsize=(6.4, 4.0), layout="constrained")
+    ax = fig.add_subplot()
+    for name in filters if filters is not None else result.filter_names:
+        err = np.abs(result.filters[name].estimates[:, run, component] - result.truth[:, run, component])
+        ax.plot(result.times, err, linewidth=1.2, label=name)
+    label = result.state_labels[component]
+    ax.set_xlabel("time step")
+    ax.set_ylabel(f"|{label} error|")
+    ax.set_title(title or f"Absolute error of {label}, run {run}")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    return fig
+
+
+def particle_clouds(
+    snapshots: Mapping[str, Mapping[int, Mapping[str, np.ndarray]]],
+    truth: np.ndarray,
+    component: int = 0,
+    *,
+    label: str = "x",
+    title: str | None = None,
+) -> Figure:
+    """Particle values against particle index at chosen steps: one row per filter, one column per step.
+
+    Parameters
+    ----------
+    snapshots
+        ``{filter: {step: {"particles": (1, N, n), "weights": (1, N)}}}``
+        for one run (see :func:`pursuit.engine.snapshots.particle_snapshots`).
+    truth
+        ``(K, n)`` truth of that run; a horizontal line marks the true value.
+    component
+        State component to plot.
+    """
+    names = list(snapshots)
+    steps = sorted({s for snap in snapshots.values() for s in snap})
+    if not names or not steps:
+        raise ValueError("snapshots: nothing to draw")
+    fig = Figure(figsize=(3.2 * len(steps), 2.6 * len(names)), layout="constrained")
+    axes = fig.subplots(len(names), len(steps), squeeze=False, sharey="col")
+    for r, name in enumerate(names):
+        for c, step in enumerate(steps):
+            ax = axes[r][c]
+            snap = snapshots[name].get(step)
+            if snap is None:
+                ax.set_visible(False)
+                continue
+            p = np.asarray(snap["particles"])[0, :, component]
+            w = np.asarray(snap["weights"])[0]
+            size = 4.0 + 60.0 * w / max(float(w.max()), 1e-300)
+            ax.scatter(np.arange(p.size), p, s=size, alpha=0.6, linewidths=0)
+            ax.axhline(truth[step - 1, component], color="black", linewidth=1.0, label="truth")
+            ax.set_title(f"{name}, step {step}", fontsize=9)
+            if c == 0:
+                ax.set_ylabel(label)
+            if r == len(names) - 1:
+                ax.set_xlabel("particle index")
+            ax.grid(True, alpha=0.3)
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
+def metric_against_value(
+    rows: Sequence[Mapping[str, object]],
+    value_key: str,
+    metric: str,
+    *,
+    error_key: str | None = None,
+    ylabel: str | None = None,
+    log: bool = False,
+    title: str | None = None,
+) -> Figure:
+    """A metric against the swept value, one line per filter (and variant)."""
+    fig = Figure(figsize=(6.4, 4.0), layout="constrained")
+    ax = fig.add_subplot()
+    groups: dict[str, list[Mapping[str, object]]] = {}
+    for row in rows:
+        key = str(row["filter"]) if not row.get("variant") else f"{row['filter']} ({row['variant']})"
+        groups.setdefault(key, []).append(row)
+    for key, rs in groups.items():
+        rs = [r for r in rs if r.get(value_key) is not None]
+        if not rs:
+            continue
+        x = np.array([float(r[value_key]) for r in rs])
+        y = np.array([float(r[metric]) for r in rs])
+        order = np.argsort(x)
+        if error_key is not None:
+            err = np.array([float(r[error_key]) for r in rs])
+            ax.errorbar(x[order], y[order], yerr=err[order], marker="o", capsize=3, label=key)
+        else:
+            ax.plot(x[order], y[order], marker="o", label=key)
+    for row in rows:  # baselines that do not depend on the swept value
+        if row.get(value_key) is None:
+            key = str(row["filter"]) if not row.get("variant") else f"{row['filter']} ({row['variant']})"
+            ax.axhline(float(row[metric]), linestyle="--", linewidth=1.0, color="gray")
+            ax.annotate(key, (ax.get_xlim()[0], float(row[metric])), fontsize=8, va="bottom")
+    if log:
+        ax.set_yscale("log")
+    ax.set_xlabel(value_key)
+    ax.set_ylabel(ylabel or metric)
+    ax.set_title(title or f"{metric} against {value_key}")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig
