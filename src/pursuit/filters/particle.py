@@ -392,15 +392,11 @@ class ParticleFilterBase:
         return Zp, ll, const
 
     def _predictive(
-        self, Zp: np.ndarray, omega: np.ndarray | None, z: np.ndarray, valid: np.ndarray, k: int, work: Workspace | None = None
+        self, Zp: np.ndarray, omega: np.ndarray, z: np.ndarray, valid: np.ndarray, k: int, work: Workspace | None = None
     ):
-        """Innovation statistics from predicted measurements and predictive weights."""
+        """Innovation statistics from predicted measurements and normalised predictive weights."""
         meas = self.measurement
-        N = Zp.shape[-2]
-        if omega is None:
-            wmean = lambda A: np.einsum("...pi->...i", A) / N  # noqa: E731
-        else:
-            wmean = lambda A: np.einsum("...p,...pi->...i", omega, A)  # noqa: E731
+        wmean = lambda A: np.einsum("...p,...pi->...i", omega, A)  # noqa: E731
         if self._plain_residual:
             zhat = wmean(Zp)
             D = np.subtract(Zp, zhat[..., None, :], out=scratch(work, "pred.D", Zp.shape))
@@ -413,11 +409,10 @@ class ParticleFilterBase:
         m = Zp.shape[-1]
         if m == 1:
             d = D[..., 0]
-            Pzz = (np.einsum("...p,...p->...", d, d) / N if omega is None else np.einsum("...p,...p,...p->...", omega, d, d))[
-                ..., None, None
-            ]
+            dw = np.multiply(d, omega, out=scratch(work, "pred.Dw", d.shape))
+            Pzz = np.einsum("...p,...p->...", dw, d)[..., None, None]
         else:
-            Dw = D / N if omega is None else D * omega[..., None]
+            Dw = np.multiply(D, omega[..., None], out=scratch(work, "pred.Dw", D.shape))
             Pzz = symmetrize(np.einsum("...pi,...pj->...ij", Dw, D))
         R = np.asarray(meas.cov(k), dtype=float)
         batch = z.shape[:-1]
@@ -473,26 +468,32 @@ class ParticleFilterBase:
         Weighed
         """
         N = X.shape[-2]
+        log_n = float(np.log(N))
         valid = ~np.isnan(z)
         measured = valid.any(axis=-1)
         Zp, ll, const = self._likelihoods(X, z, k, valid, measured, work)
-        # predictive weights (module docstring): previous weights times p/q
-        if log_correction is None:
-            log_pred = log_prior
-            omega = None if log_prior is None else np.exp(log_prior)
-        else:
-            log_pred = log_correction - np.log(N) if log_prior is None else log_prior + log_correction
-            log_pred = np.where(np.isnan(log_pred), -np.inf, log_pred)
-            top = np.max(log_pred, axis=-1, keepdims=True)
-            ew = np.exp(log_pred - np.where(np.isfinite(top), top, 0.0))
+        # Previous weights enter as offset = log w_{k-1} + log N, which is exactly 0 for a
+        # run that resampled (its log-weights are exactly −log N).  The all-uniform fast
+        # path skips only those exact no-ops, so a run gets the same bits whether or
+        # not the other runs in its batch resampled.
+        offset = None if log_prior is None else log_prior + log_n
+        if log_correction is not None:  # predictive weights ∝ w_{k-1} p/q (module docstring)
+            lp = log_correction if offset is None else log_correction + offset
+            lp = np.where(np.isnan(lp), -np.inf, lp)
+            top = np.max(lp, axis=-1, keepdims=True)
+            ew = np.exp(lp - np.where(np.isfinite(top), top, 0.0))
             omega = ew / ew.sum(axis=-1, keepdims=True)
+            offset = lp
+        elif offset is None:
+            omega = scratch(work, "weigh.omega", ll.shape)
+            omega.fill(1.0 / N)
+        else:
+            omega = np.exp(offset) * (1.0 / N)
         info = self._predictive(Zp, omega, z, valid, k, work)
-        a = ll if log_pred is None else log_pred + ll
-        shifted, mx, e, reset = _exp_shifted(a, log_pred, work)
+        a = ll if offset is None else ll + offset
+        shifted, mx, e, reset = _exp_shifted(a, offset, work)
         s = e.sum(axis=-1)
-        loglik = mx + np.log(s) + np.where(measured, const, 0.0)
-        if log_pred is None:
-            loglik = loglik - np.log(N)
+        loglik = mx + np.log(s) + (np.where(measured, const, 0.0) - log_n)
         loglik = np.where(reset, -np.inf, loglik)
         loglik = np.where(measured, loglik, 0.0)
         info["loglik"] = loglik

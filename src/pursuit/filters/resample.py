@@ -190,9 +190,10 @@ def residual_counts(w: np.ndarray, rng: np.random.Generator | RunStreams, work: 
     shape = w.shape
     N = shape[-1]
     Nw = N * (w / w.sum(axis=-1, keepdims=True))
-    det = np.floor(Nw)
+    # N w = 1 − ε from round-off must still give one deterministic copy
+    det = np.floor(Nw + 1e-9)
     rest = np.maximum(N - det.sum(axis=-1), 0).astype(np.intp)  # (*batch,)
-    r = Nw - det
+    r = np.maximum(Nw - det, 0.0)
     total = r.sum(axis=-1, keepdims=True)
     # Rows with nothing left to draw get a harmless uniform residual.
     r = np.where(total > 0, r, 1.0)
