@@ -60,7 +60,7 @@ def _pf(scenario, where="filter", name=None, particles=1000, resampler="systemat
         Param("ess_threshold", "float", 0.5, "resample when ESS < ess_threshold * N (the patent's N/2)"),
         Param("select", "str", "weight", "important particles", choices=("weight", "random", "block")),
         Param("rounding", "str", "nearest", "n_u from l*N", choices=("nearest", "floor", "ceil")),
-        Param("cov_mode", "str", "population", "covariance of prior-group particles", choices=("population", "propagate", "reset")),
+        Param("cov_mode", "str", "population", "covariance of prior-group particles", choices=("population", "propagate", "reset", "zero")),
         Param("alpha", "float", 1.0, "unscented-transform spread"),
         Param("beta", "float", 2.0, "unscented-transform prior-knowledge weight"),
         Param("kappa", "float", 0.0, "unscented-transform secondary scaling"),

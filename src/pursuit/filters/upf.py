@@ -141,6 +141,10 @@ class PartialUPF(ParticleFilterBase):
         Covariance of prior-group particles (U3): ``"population"``
         (weighted cloud covariance + 1e−9·I), ``"propagate"``
         (F P Fᵀ + Q, grows if never updated) or ``"reset"`` (the prior's).
+        ``"zero"`` (not in the spec) sets *every* particle's covariance to
+        1e−9·I after each step, so the UKF proposal approximates the locally
+        optimal proposal p(x_k | x_{k−1}^i, z_k) (exact on linear-Gaussian
+        models) instead of spreading each particle over the whole posterior.
     alpha, beta, kappa
         Unscented-transform parameters (U4; default 1, 2, 0).
     singular_noise, jitter
@@ -167,7 +171,7 @@ class PartialUPF(ParticleFilterBase):
         for name, choices in (
             ("select", ("weight", "random", "block")),
             ("rounding", ("nearest", "floor", "ceil")),
-            ("cov_mode", ("population", "propagate", "reset")),
+            ("cov_mode", ("population", "propagate", "reset", "zero")),
             ("singular_noise", ("cwna", "jitter")),
         ):
             if getattr(self, name) not in choices:
@@ -196,11 +200,13 @@ class PartialUPF(ParticleFilterBase):
         return int(min(max(n, 0), self.particles))
 
     def init(self, prior: Any, batch: tuple[int, ...] = (), rng: RNGLike = None) -> ParticleState:
-        """Draw the particles from the prior; every particle starts with the prior covariance."""
+        """Draw the particles from the prior; every particle starts with the prior covariance
+        (with ``cov_mode="zero"``: 1e−9·I)."""
         state = super().init(prior, batch, rng)
         P0 = state.cov
         n = P0.shape[-1]
-        Pi = np.broadcast_to(P0[..., None, :, :], (*state.batch, self.particles, n, n))
+        start = 1e-9 * np.eye(n) if self.cov_mode == "zero" else P0[..., None, :, :]
+        Pi = np.broadcast_to(start, (*state.batch, self.particles, n, n))
         return replace(state, particle_cov=Pi, memory=P0)
 
     # -- one step ----------------------------------------------------------------
@@ -293,6 +299,8 @@ class PartialUPF(ParticleFilterBase):
         N = self.particles
         n = cov.shape[-1]
         n_r = N - n_u
+        if self.cov_mode == "zero":
+            return np.broadcast_to(1e-9 * np.eye(n), (*batch, N, n, n))
         if n_r == 0:
             return P_u
         if self.cov_mode == "population":
