@@ -3,7 +3,13 @@
 from .engine.montecarlo import monte_carlo
 from .engine.run import run
 from .filters import (
+    CSPF,
+    ICSPF,
+    SIR,
+    BootstrapParticleFilter,
     Constant,
+    CuckooSearch,
+    PartialUPF,
     CubatureKalmanFilter,
     ExponentiallyWeighted,
     ExtendedKalmanFilter,
@@ -51,5 +57,11 @@ __all__ = [
     "Improved",
     "rts_smooth",
     "load",
+    "BootstrapParticleFilter",
+    "SIR",
+    "PartialUPF",
+    "CuckooSearch",
+    "CSPF",
+    "ICSPF",
     "__version__",
 ]

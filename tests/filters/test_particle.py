@@ -226,3 +226,18 @@ def test_bad_parameters_are_refused():
     state = filt.init(pu.Gaussian([0.0], [[1.0]]), batch=(2,), rng=0)
     with pytest.raises(ValueError, match="infinity"):
         filt.step(state, np.array([[np.inf], [0.0]]))
+
+
+@pytest.mark.slow
+def test_pf_improves_with_more_particles_on_ungm():
+    # Paper P1 §6 expects the PF to improve as N grows; shown here with a paired
+    # run-by-run comparison over the p1-ungm set-up (100 runs, 50 steps).
+    from pursuit.components.sweep import paired_difference, run_metric
+
+    sc = UNGM(steps=50)
+    errs = {}
+    for N in (30, 100):
+        res = monte_carlo(sc, [BootstrapParticleFilter(sc.motion, sc.measurement, particles=N)], runs=100, seed=20220701)
+        errs[N] = run_metric(res, "PF", "state", "per-run")[0]
+    mean, half, verdict = paired_difference(errs[100], errs[30])
+    assert verdict == "A < B", (mean, half)

@@ -10,9 +10,12 @@ from .gaussian import (
     KalmanFilter,
     UnscentedKalmanFilter,
 )
+from .cuckoo import CSPF, ICSPF, CuckooParticleFilter, CuckooSearch
+from .particle import SIR, BootstrapParticleFilter, ParticleState
 from .imm import InteractingMultipleModel, StateMap, kinematic_map
 from .ifmkf import Improved
 from .smoother import SmoothedTrack, rts_smooth
+from .upf import PartialUPF
 
 __all__ = [
     "KalmanFilter",
@@ -36,4 +39,12 @@ __all__ = [
     "FadingStrategy",
     "rts_smooth",
     "SmoothedTrack",
+    "BootstrapParticleFilter",
+    "SIR",
+    "ParticleState",
+    "PartialUPF",
+    "CuckooSearch",
+    "CuckooParticleFilter",
+    "CSPF",
+    "ICSPF",
 ]
