@@ -145,12 +145,13 @@ def machine() -> str:
     )
 
 
-def main(argv: list[str] | None = None) -> dict[str, Any]:
-    """Run the benchmarks, print a markdown table, return the numbers."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
-    ap.add_argument("--repeat", type=int, default=2, help="best of this many timings")
-    args = ap.parse_args(argv)
+def main(quick: bool = False, repeat: int = 2) -> dict[str, Any]:
+    """Run the benchmarks, print a markdown table, return the numbers.
+
+    ``quick`` uses small sizes (a smoke test); ``repeat``: best of this many
+    timings of pursuit (the peer is timed once: it takes much longer).
+    """
+    args = argparse.Namespace(quick=quick, repeat=repeat)
     M, T = (20, 20) if args.quick else (100, 100)
     sizes = (1000,) if args.quick else (1000, 10000)
     wsn_runs = 5 if args.quick else 100
@@ -197,4 +198,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
 
 
 if __name__ == "__main__":
-    main()
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
+    ap.add_argument("--repeat", type=int, default=2, help="best of this many timings")
+    cli = ap.parse_args()
+    main(quick=cli.quick, repeat=cli.repeat)
