@@ -285,7 +285,8 @@ class SweepPlan:
             measured = None if r is None else r.get(p["metric"])
             ratio = measured / p["value"] if isinstance(measured, float) and p["value"] else None
             line = [p["variant"]] if self.variants else []
-            out.append(line + [p["at"], p["filter"], p["metric"], p["value"], measured, ratio, p["note"]])
+            at = p["at"] if r is None or r[self.label] is None else r[self.label]  # as written in [sweep]
+            out.append(line + [at, p["filter"], p["metric"], p["value"], measured, ratio, p["note"]])
         cols = (["variant"] if self.variants else []) + [self.label, "filter", "metric", "paper", "measured", "measured/paper", "note"]
         return Table(
             "paper_vs_measured",
