@@ -391,29 +391,58 @@ class ParticleFilterBase:
             ll = np.where(measured[..., None], ll, 0.0)
         return Zp, ll, const
 
-    def _predictive(
-        self, Zp: np.ndarray, omega: np.ndarray, z: np.ndarray, valid: np.ndarray, k: int, work: Workspace | None = None
-    ):
-        """Innovation statistics from predicted measurements and normalised predictive weights."""
+    def _spread(self, Zp: np.ndarray, omega: np.ndarray | None, work: Workspace | None):
+        """ẑ and Σ ω (h − ẑ)(h − ẑ)ᵀ; ``omega=None`` means equal weights (cheaper arithmetic)."""
         meas = self.measurement
-        wmean = lambda A: np.einsum("...p,...pi->...i", omega, A)  # noqa: E731
+        N = Zp.shape[-2]
+        if omega is None:
+            wmean = lambda A: np.einsum("...pi->...i", A) * (1.0 / N)  # noqa: E731
+        else:
+            wmean = lambda A: np.einsum("...p,...pi->...i", omega, A)  # noqa: E731
         if self._plain_residual:
             zhat = wmean(Zp)
             D = np.subtract(Zp, zhat[..., None, :], out=scratch(work, "pred.D", Zp.shape))
-            nu_full = z - zhat
         else:  # average angles about one particle's value, not across the ±π cut
             Z0 = Zp[..., :1, :]
             zhat = Z0[..., 0, :] + wmean(meas.residual(Zp, Z0))
             D = meas.residual(Zp, zhat[..., None, :])
-            nu_full = meas.residual(z, zhat)
-        m = Zp.shape[-1]
-        if m == 1:
+        if Zp.shape[-1] == 1:
             d = D[..., 0]
-            dw = np.multiply(d, omega, out=scratch(work, "pred.Dw", d.shape))
-            Pzz = np.einsum("...p,...p->...", dw, d)[..., None, None]
+            if omega is None:
+                Pzz = np.einsum("...p,...p->...", d, d) * (1.0 / N)
+            else:
+                Pzz = np.einsum("...p,...p->...", np.multiply(d, omega, out=scratch(work, "pred.Dw", d.shape)), d)
+            return zhat, Pzz[..., None, None]
+        if omega is None:
+            Pzz = np.einsum("...pi,...pj->...ij", D, D) * (1.0 / N)
         else:
-            Dw = np.multiply(D, omega[..., None], out=scratch(work, "pred.Dw", D.shape))
-            Pzz = symmetrize(np.einsum("...pi,...pj->...ij", Dw, D))
+            Pzz = np.einsum("...pi,...pj->...ij", np.multiply(D, omega[..., None], out=scratch(work, "pred.Dw", D.shape)), D)
+        return zhat, symmetrize(Pzz)
+
+    def _predictive(
+        self,
+        Zp: np.ndarray,
+        omega: np.ndarray | None,
+        uniform_rows: np.ndarray | None,
+        z: np.ndarray,
+        valid: np.ndarray,
+        k: int,
+        work: Workspace | None = None,
+    ):
+        """Innovation statistics from predicted measurements and normalised predictive weights.
+
+        ``omega=None``: every run has equal weights.  Otherwise the runs in
+        ``uniform_rows`` (equal weights) get the equal-weight arithmetic too,
+        so a run's numbers do not depend on its neighbours in the batch.
+        """
+        meas = self.measurement
+        zhat, Pzz = self._spread(Zp, omega, work)
+        if omega is not None and uniform_rows is not None and uniform_rows.any():
+            zu, Pu = self._spread(Zp, None, work)
+            zhat = np.where(uniform_rows[..., None], zu, zhat)
+            Pzz = np.where(uniform_rows[..., None, None], Pu, Pzz)
+        nu_full = z - zhat if self._plain_residual else meas.residual(z, zhat)
+        m = Zp.shape[-1]
         R = np.asarray(meas.cov(k), dtype=float)
         batch = z.shape[:-1]
         if valid.all():
@@ -477,6 +506,7 @@ class ParticleFilterBase:
         # path skips only those exact no-ops, so a run gets the same bits whether or
         # not the other runs in its batch resampled.
         offset = None if log_prior is None else log_prior + log_n
+        uniform_rows = None
         if log_correction is not None:  # predictive weights ∝ w_{k-1} p/q (module docstring)
             lp = log_correction if offset is None else log_correction + offset
             lp = np.where(np.isnan(lp), -np.inf, lp)
@@ -485,11 +515,11 @@ class ParticleFilterBase:
             omega = ew / ew.sum(axis=-1, keepdims=True)
             offset = lp
         elif offset is None:
-            omega = scratch(work, "weigh.omega", ll.shape)
-            omega.fill(1.0 / N)
+            omega = None
         else:
             omega = np.exp(offset) * (1.0 / N)
-        info = self._predictive(Zp, omega, z, valid, k, work)
+            uniform_rows = ~np.any(offset, axis=-1)
+        info = self._predictive(Zp, omega, uniform_rows, z, valid, k, work)
         a = ll if offset is None else ll + offset
         shifted, mx, e, reset = _exp_shifted(a, offset, work)
         s = e.sum(axis=-1)
