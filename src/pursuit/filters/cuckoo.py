@@ -74,6 +74,7 @@ from ..rng import RunStreams
 from .particle import (
     ParticleFilterBase,
     ParticleState,
+    Weighed,
     _exp_shifted,
     _prepare_measurement,
     _propagate,
@@ -378,8 +379,8 @@ class CuckooParticleFilter(ParticleFilterBase):
     motion, measurement, particles, resampler, name
         See :class:`pursuit.filters.particle.ParticleFilterBase`.
     ess_threshold
-        Resample when ESS < ``ess_threshold``·N; used only with
-        ``weight_mode="sequential"`` (default 0.5).
+        Resample when ESS < ``ess_threshold``·N (None: every step); used
+        only with ``weight_mode="sequential"`` (default 0.5).
     search
         The :class:`CuckooSearch` settings (iterations, schedules, moves).
     weight_mode
@@ -433,7 +434,7 @@ class CuckooParticleFilter(ParticleFilterBase):
         X, F, stats = self.search.run(X, lambda C: self._fitness(C, z, k), rng, F=weighed.ll)
         # weights of the moved particles
         a = F if log_prior is None else log_prior + F
-        shifted, mx, e, reset = _exp_shifted_fresh(a, log_prior)
+        shifted, mx, e, reset = _exp_shifted(a, log_prior, None)
         s = e.sum(axis=-1)
         ess = s**2 / np.einsum("...i,...i->...", e, e)
         if self.estimate == "mean":
@@ -448,9 +449,9 @@ class CuckooParticleFilter(ParticleFilterBase):
         uniform = False
         need = np.zeros(state.batch, dtype=bool)
         if sequential:
-            need = weighed.measured & (ess < self.ess_threshold * N)
+            moved = Weighed(shifted, mx, e, s, F, 0.0, weighed.measured, {})
+            need = self._needs_resampling(moved, ess)
             if need.any():
-                moved = _Moved(shifted, mx, e, s, weighed.measured)
                 (X,), logw, uniform = self.resample([X], moved, need, rng, None)
         info["weights_reset"] = reset
         info["ess"] = ess
@@ -459,25 +460,6 @@ class CuckooParticleFilter(ParticleFilterBase):
         info["iterations"] = stats["iterations"]
         info["acceptance"] = stats["accepted"] / (2.0 * N * np.maximum(stats["iterations"], 1))
         return ParticleState(X, logw, mean, cov, rng, k, uniform, work=work), info
-
-
-@dataclass
-class _Moved:
-    """The attributes of :class:`Weighed` that resampling reads."""
-
-    shifted: np.ndarray
-    mx: np.ndarray
-    e: np.ndarray
-    s: np.ndarray
-    measured: np.ndarray
-
-    @property
-    def logw(self) -> np.ndarray:
-        return self.shifted - np.log(self.s)[..., None]
-
-
-def _exp_shifted_fresh(a: np.ndarray, fallback: np.ndarray | None):
-    return _exp_shifted(a, fallback, None)
 
 
 @dataclass(frozen=True)

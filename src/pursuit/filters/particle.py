@@ -72,7 +72,15 @@ from ..rng import RNGLike, RunStreams, as_rng
 from ._workspace import Workspace, scratch
 from .resample import get_resampler, repeat_particles
 
-__all__ = ["ParticleState", "BootstrapParticleFilter", "SIR", "weighted_moments", "rows_rng"]
+__all__ = [
+    "ParticleState",
+    "ParticleFilterBase",
+    "Weighed",
+    "BootstrapParticleFilter",
+    "SIR",
+    "weighted_moments",
+    "rows_rng",
+]
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 

@@ -289,8 +289,8 @@ class PartialUPF(ParticleFilterBase):
         fx = np.asarray(model.f(x_prev, k) if dt is None else model.f(x_prev, k, dt=dt), dtype=float)
         Q = np.asarray(model.cov(k) if dt is None else model.cov(k, dt=dt), dtype=float)
         L = np.linalg.cholesky(Q)
-        y = np.linalg.solve(L, np.moveaxis(x - fx, -1, 0).reshape(Q.shape[0], -1))
-        maha = np.sum(y * y, axis=0).reshape(x.shape[:-1])
+        y = mv(np.linalg.inv(L), x - fx)  # einsum: the same arithmetic for every particle and run
+        maha = np.einsum("...i,...i->...", y, y)
         return -0.5 * maha - np.sum(np.log(np.diag(L))) - 0.5 * Q.shape[0] * _LOG_2PI
 
     def _particle_covariances(self, P_u, P_prev, X_prev, state, cov, n_u, k, dt, order):
