@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -128,21 +127,12 @@ def bench_p1_wsn(runs: int) -> tuple[float, dict[str, float]]:
 
 
 def machine() -> str:
-    """A one-line description of the machine."""
-    cpu = platform.processor() or "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
+    """The machine line of ``benchmarks/run.py``, with the load average at the start."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from run import machine as describe
+
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    return (
-        f"{cpu}, {os.cpu_count()} CPUs, Python {platform.python_version()}, NumPy {np.__version__}, "
-        f"load average {load:.2f} at start"
-    )
+    return f"{describe()}; load average {load:.2f} at start"
 
 
 def main(quick: bool = False, repeat: int = 2) -> dict[str, Any]:
@@ -166,12 +156,12 @@ def main(quick: bool = False, repeat: int = 2) -> dict[str, Any]:
         rows.append((f"bootstrap PF, UNGM, M={M}, T={T}, N={N}: pursuit", f"{rate / 1e6:.1f} M particle-steps/s", f"{t_ours:.2f} s"))
         t_peer = bench_particles_pf(M, T, N, 1)
         if t_peer is None:
-            rows.append((f"same work: particles (Chopin)", "skipped (not installed)", ""))
+            rows.append(("same work: particles (Chopin)", "skipped (not installed)", ""))
         else:
             prate = work / t_peer
             numbers[f"particles_pf_N{N}"] = prate
             rows.append(
-                (f"same work: particles (Chopin)", f"{prate / 1e6:.1f} M particle-steps/s", f"{t_peer:.2f} s; pursuit {rate / prate:.1f}x faster")
+                ("same work: particles (Chopin)", f"{prate / 1e6:.1f} M particle-steps/s", f"{t_peer:.2f} s; pursuit {rate / prate:.1f}x faster")
             )
 
     N_ics = 100 if args.quick else 1000

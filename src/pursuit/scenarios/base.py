@@ -22,7 +22,7 @@ import numpy as np
 
 from ..gaussian import Gaussian
 
-__all__ = ["Simulation", "simulate_markov"]
+__all__ = ["Simulation", "simulate_markov", "resolve_runs"]
 
 
 @dataclass(frozen=True)
@@ -73,3 +73,20 @@ def simulate_markov(motion, measurement, x0: np.ndarray, steps: int, rng) -> tup
         truth[i] = x
         zs[i] = z
     return truth, zs
+
+
+def resolve_runs(rng, runs: int | None):
+    """``(rng, runs)`` for a scenario's ``simulate``: ``runs`` defaults to the number of streams.
+
+    Raises ``ValueError`` naming ``runs`` when it is missing with a single
+    Generator or is not a positive integer.
+    """
+    from .._validation import positive_int
+    from ..rng import RunStreams, as_rng
+
+    rng = as_rng(rng)
+    if runs is None:
+        if not isinstance(rng, RunStreams):
+            raise ValueError("runs: required when rng is a single Generator")
+        runs = len(rng)
+    return rng, positive_int("runs", runs)

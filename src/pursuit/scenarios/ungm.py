@@ -10,8 +10,8 @@ import numpy as np
 from .._validation import as_float_array, positive, positive_int
 from ..gaussian import Gaussian
 from ..models.ungm import UNGMMeasurement, UNGMMotion
-from ..rng import RNGLike, RunStreams, as_rng
-from .base import Simulation, simulate_markov
+from ..rng import RNGLike
+from .base import Simulation, resolve_runs, simulate_markov
 
 __all__ = ["UNGM"]
 
@@ -75,12 +75,7 @@ class UNGM:
         both settings see the same truth), then per step the process noise
         and the measurement noise.
         """
-        rng = as_rng(rng)
-        if runs is None:
-            if not isinstance(rng, RunStreams):
-                raise ValueError("runs: required when rng is a single Generator")
-            runs = len(rng)
-        runs = positive_int("runs", runs)
+        rng, runs = resolve_runs(rng, runs)
         offset = rng.standard_normal((runs, 1))
         if self.prior_mean == "sampled":
             mean = self.x0 + np.sqrt(self.P0) * offset
