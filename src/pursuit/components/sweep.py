@@ -145,6 +145,12 @@ def _fmt_value(v: float) -> str:
     return f"{v:g}"
 
 
+def _slug(text: str) -> str:
+    """A file-name-safe version of a label."""
+    out = "".join(c.lower() if c.isalnum() else "-" for c in text)
+    return "-".join(p for p in out.split("-") if p)
+
+
 @dataclass
 class SweepPlan:
     """A validated ``sweep`` experiment."""
@@ -325,9 +331,18 @@ class SweepPlan:
         sw = self.sweep
         label = self.label
         if len(sw["values"]) > 1:
-            figs[f"rmse_vs_{label}"] = metric_against_value(
-                rows, label, "rmse", error_key="ci95", ylabel=f"{sw['component']} RMSE", title=f"RMSE against {label}"
-            )
+            # one RMSE figure per scenario variant: their scales can differ by orders of magnitude
+            for variant in [v["label"] for v in self.variants] or [None]:
+                sub = [r for r in rows if variant is None or r.get("variant") == variant]
+                name = f"rmse_vs_{label}" if variant is None else f"rmse_vs_{label}_{_slug(variant)}"
+                figs[name] = metric_against_value(
+                    sub,
+                    label,
+                    "rmse",
+                    error_key="ci95",
+                    ylabel=f"{sw['component']} RMSE",
+                    title=f"RMSE against {label}" + ("" if variant is None else f", {variant}"),
+                )
             figs[f"time_vs_{label}"] = metric_against_value(
                 rows, label, "wall_time_s", ylabel="wall time (s)", title=f"Run time against {label}"
             )

@@ -95,8 +95,9 @@ def metric_against_value(
     fig = Figure(figsize=(6.4, 4.0), layout="constrained")
     ax = fig.add_subplot()
     groups: dict[str, list[Mapping[str, object]]] = {}
+    variants = {row.get("variant") for row in rows}
     for row in rows:
-        key = str(row["filter"]) if not row.get("variant") else f"{row['filter']} ({row['variant']})"
+        key = str(row["filter"]) if len(variants) <= 1 or not row.get("variant") else f"{row['filter']} ({row['variant']})"
         groups.setdefault(key, []).append(row)
     for key, rs in groups.items():
         rs = [r for r in rs if r.get(value_key) is not None]
@@ -112,7 +113,7 @@ def metric_against_value(
             ax.plot(x[order], y[order], marker="o", label=key)
     for row in rows:  # baselines that do not depend on the swept value
         if row.get(value_key) is None:
-            key = str(row["filter"]) if not row.get("variant") else f"{row['filter']} ({row['variant']})"
+            key = str(row["filter"]) if len(variants) <= 1 or not row.get("variant") else f"{row['filter']} ({row['variant']})"
             ax.axhline(float(row[metric]), linestyle="--", linewidth=1.0, color="gray")
             ax.annotate(key, (ax.get_xlim()[0], float(row[metric])), fontsize=8, va="bottom")
     if log:
