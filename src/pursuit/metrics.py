@@ -65,6 +65,13 @@ def nees(estimates: np.ndarray, covariances: np.ndarray, truth: np.ndarray) -> n
     """
     e = np.asarray(estimates, dtype=float) - np.asarray(truth, dtype=float)
     P = np.asarray(covariances, dtype=float)
+    # A degenerate filter (a particle filter whose weights collapsed on one particle) can
+    # report a nearly singular covariance: its NEES then overflows to inf, its honest value.
+    with np.errstate(over="ignore"):
+        return _nees(e, P)
+
+
+def _nees(e: np.ndarray, P: np.ndarray) -> np.ndarray:
     out = np.full(e.shape[:-1], np.nan)
     try:
         L = np.linalg.cholesky(P)

@@ -214,7 +214,10 @@ class SweepPlan:
             for i, value in enumerate(sw["values"]):
                 built = self._filters_swept(scenario, value, baselines=i == 0)
                 filters = [f for f, _ in built]
-                result = monte_carlo(scenario, filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections)
+                result = monte_carlo(
+                    scenario, filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections,
+                    store="full",  # per-run RMSEs, paired comparisons and one-run figures need every run
+                )
                 key = f"{vlabel}|{self.label}={_fmt_value(value)}" if vlabel else f"{self.label}={_fmt_value(value)}"
                 results[key] = result
                 if variant is None or variant is self.variants[0]:

@@ -71,10 +71,8 @@ def particle_clouds(
             ax.scatter(np.arange(p.size), p, s=size, alpha=0.6, linewidths=0)
             ax.axhline(truth[step - 1, component], color="black", linewidth=1.0, label="truth")
             ax.set_title(f"{name}, step {step}", fontsize=9)
-            if c == 0:
-                ax.set_ylabel(label)
-            if r == len(names) - 1:
-                ax.set_xlabel("particle index")
+            ax.set_ylabel(label)
+            ax.set_xlabel("particle index")
             ax.grid(True, alpha=0.3)
     if title:
         fig.suptitle(title)
