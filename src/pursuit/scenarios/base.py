@@ -20,7 +20,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._validation import positive_int
 from ..gaussian import Gaussian
+from ..rng import RunStreams, as_rng
 
 __all__ = ["Simulation", "simulate_markov", "resolve_runs"]
 
@@ -81,9 +83,6 @@ def resolve_runs(rng, runs: int | None):
     Raises ``ValueError`` naming ``runs`` when it is missing with a single
     Generator or is not a positive integer.
     """
-    from .._validation import positive_int
-    from ..rng import RunStreams, as_rng
-
     rng = as_rng(rng)
     if runs is None:
         if not isinstance(rng, RunStreams):
