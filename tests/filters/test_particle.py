@@ -241,3 +241,12 @@ def test_pf_improves_with_more_particles_on_ungm():
         errs[N] = run_metric(res, "PF", "state", "per-run")[0]
     mean, half, verdict = paired_difference(errs[100], errs[30])
     assert verdict == "A < B", (mean, half)
+
+
+def test_nis_of_a_non_finite_or_singular_spread_is_nan_not_an_error():
+    from pursuit.filters.particle import _safe_inverse
+
+    S = np.stack([np.diag([2.0, 1.0, 4.0, 1.0]), np.full((4, 4), 1.0), np.diag([np.inf, 1.0, 1.0, 1.0])])
+    inv = _safe_inverse(S)
+    np.testing.assert_allclose(inv[0], np.linalg.inv(S[0]))
+    assert np.all(np.isnan(inv[1])) and np.all(np.isnan(inv[2]))

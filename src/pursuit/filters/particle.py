@@ -25,8 +25,9 @@ UPF) ω_i ∝ w_{k−1,i} p(x_{k,i} | x_{k−1,i}) / q(x_{k,i}).
     measurement noise, the predictive covariance of z.  Missing components
     are decoupled with unit variance, as in the Gaussian filters.
 ``nis``, ``dof``
-    νᵀS⁻¹ν over the measured components (NaN when nothing is measured) and
-    the number of measured components.
+    νᵀS⁻¹ν over the measured components (NaN when nothing is measured, and
+    when S is not finite or singular, as in a diverged filter) and the
+    number of measured components.
 ``loglik`` (*b,)
     log Σ_i w_{k−1,i} α_i, with α_i the incremental importance weight (for
     the bootstrap filter α_i = p(z_k | x_{k,i}) with the measurement model's
@@ -176,6 +177,27 @@ def weighted_moments(
         de = np.multiply(d, e[..., None], out=scratch(work, "moments.de", X.shape))
         cov = symmetrize(np.einsum("...pi,...pj->...ij", de, d) * inv[..., None, None])
     return mean, cov
+
+
+def _safe_inverse(S: np.ndarray) -> np.ndarray:
+    """Inverse of a stack of innovation covariances; NaN where one is not finite or singular.
+
+    A diverged filter (particles at astronomically large values) can produce
+    an infinite or singular S; its NIS is then NaN rather than an exception.
+    """
+    ok = np.all(np.isfinite(S), axis=(-2, -1))
+    if ok.all():
+        try:
+            return inv_spd(S)
+        except np.linalg.LinAlgError:
+            pass
+    m = S.shape[-1]
+    Sf = np.where(ok[..., None, None], S, np.eye(m))
+    with np.errstate(all="ignore"):
+        inv = np.linalg.pinv(Sf)
+        det = np.linalg.det(Sf)
+    bad = ~ok | ~(np.abs(det) > 0) | ~np.all(np.isfinite(inv), axis=(-2, -1))
+    return np.where(bad[..., None, None], np.nan, inv)
 
 
 def _prepare_measurement(z: np.ndarray, batch: tuple[int, ...], k: int) -> np.ndarray:
@@ -462,7 +484,7 @@ class ParticleFilterBase:
             nu = np.where(valid, nu_full, 0.0)
             S = np.where(vv, Pzz + R, 0.0) + np.eye(m) * (~valid)[..., None, :]
             dof = valid.sum(axis=-1)
-        nis = quad(nu, inv_spd(S))
+        nis = quad(nu, _safe_inverse(S))
         measured = dof > 0
         return {
             "innovation": np.where(valid, nu_full, np.nan) if not valid.all() else nu_full,
