@@ -4,6 +4,7 @@
 ``pursuit run CONFIG.toml``           run one experiment file
 ``pursuit reproduce NAME|all``        run bundled experiments (``experiments/NAME.toml``)
 ``pursuit report DIR``                rebuild report.html (and the index) from saved results
+``pursuit track DATA --config M.toml`` run a configured filter on recorded or live measurements
 
 ``run`` and ``reproduce`` take ``--workers N`` (local processes) or
 ``--scheduler tcp://HOST:PORT`` (a Dask cluster) to spread the chunks of runs.
@@ -52,6 +53,10 @@ def _parser() -> argparse.ArgumentParser:
 
     rp = sub.add_parser("report", help="rebuild report.html from a saved output folder (or every folder under it)")
     rp.add_argument("dir", help="an output folder (with run.json), or a folder of them such as results/")
+
+    from .io.command import add_track_parser
+
+    add_track_parser(sub)
     return p
 
 
@@ -85,6 +90,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_reproduce(args)
         if args.command == "report":
             return _cmd_report(args)
+        if args.command == "track":
+            from .io.command import run_track
+
+            return run_track(args)
     except ConfigError as e:
         print(f"pursuit: error: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -48,6 +48,17 @@ NAME = Param("name", "str", None, "label in tables and figures (default: the fil
 FADING = Param("fading", "any", 1.0, "fading factor λ >= 1, or a table {type = ..., ...}", check=build_fading)
 
 
+def _gate_probability(field: str, value: float) -> float:
+    if not 0.0 < value < 1.0:
+        raise ValueError(f"{field}: must lie in (0, 1), e.g. 0.999, got {value!r}")
+    return value
+
+
+GATE = Param(
+    "gate", "float", None, "chi-square gate probability: reject a measurement whose NIS exceeds this quantile (default: no gate)", check=_gate_probability
+)
+
+
 def make_filter(cls, scenario, where: str, name: str | None, **kw):
     """Build ``cls(scenario.motion, scenario.measurement, ...)``, re-anchoring errors under ``where``."""
     try:
@@ -58,14 +69,14 @@ def make_filter(cls, scenario, where: str, name: str | None, **kw):
         raise ValueError(f"{where}.{e}") from None
 
 
-@register("filter", "kf", "Linear Kalman filter (Joseph form)", params=(NAME, FADING))
-def _kf(scenario, where="filter", name=None, fading=None):
-    return make_filter(KalmanFilter, scenario, where, name, fading=fading)
+@register("filter", "kf", "Linear Kalman filter (Joseph form)", params=(NAME, FADING, GATE))
+def _kf(scenario, where="filter", name=None, fading=None, gate=None):
+    return make_filter(KalmanFilter, scenario, where, name, fading=fading, gate=gate)
 
 
-@register("filter", "ekf", "Extended Kalman filter (Joseph form; numerical Jacobians if the model has none)", params=(NAME, FADING))
-def _ekf(scenario, where="filter", name=None, fading=None):
-    return make_filter(ExtendedKalmanFilter, scenario, where, name, fading=fading)
+@register("filter", "ekf", "Extended Kalman filter (Joseph form; numerical Jacobians if the model has none)", params=(NAME, FADING, GATE))
+def _ekf(scenario, where="filter", name=None, fading=None, gate=None):
+    return make_filter(ExtendedKalmanFilter, scenario, where, name, fading=fading, gate=gate)
 
 
 @register(
@@ -78,12 +89,13 @@ def _ekf(scenario, where="filter", name=None, fading=None):
         Param("alpha", "float", 1.0, "sigma-point spread"),
         Param("beta", "float", 2.0, "prior-knowledge weight (2 is optimal for Gaussians)"),
         Param("kappa", "float", 0.0, "secondary scaling"),
+        GATE,
     ),
 )
-def _ukf(scenario, where="filter", name=None, fading=None, alpha=1.0, beta=2.0, kappa=0.0):
-    return make_filter(UnscentedKalmanFilter, scenario, where, name, fading=fading, alpha=alpha, beta=beta, kappa=kappa)
+def _ukf(scenario, where="filter", name=None, fading=None, alpha=1.0, beta=2.0, kappa=0.0, gate=None):
+    return make_filter(UnscentedKalmanFilter, scenario, where, name, fading=fading, alpha=alpha, beta=beta, kappa=kappa, gate=gate)
 
 
-@register("filter", "ckf", "Cubature Kalman filter (third-degree spherical-radial rule)", params=(NAME, FADING))
-def _ckf(scenario, where="filter", name=None, fading=None):
-    return make_filter(CubatureKalmanFilter, scenario, where, name, fading=fading)
+@register("filter", "ckf", "Cubature Kalman filter (third-degree spherical-radial rule)", params=(NAME, FADING, GATE))
+def _ckf(scenario, where="filter", name=None, fading=None, gate=None):
+    return make_filter(CubatureKalmanFilter, scenario, where, name, fading=fading, gate=gate)

@@ -5,7 +5,17 @@ propagate a Gaussian through the motion model and the measurement model:
 
 * KF and EKF linearise (exactly for the KF) and use the Joseph-form update
   ``P = (I − K H) P⁻ (I − K H)ᵀ + K R Kᵀ``;
-* UKF and CKF use sigma points and ``P = P⁻ − K S Kᵀ``.
+* UKF and CKF use sigma points and the same Joseph form with the
+  statistically linearised ``H = Pxzᵀ P⁻⁻¹`` and the linearisation-error
+  covariance ``D = Pzz − H P⁻ Hᵀ`` added to R.  This equals
+  ``P⁻ − K S Kᵀ`` exactly in exact arithmetic, but every term is a sum of
+  positive-semidefinite products (for non-negative covariance weights), so
+  the covariance stays positive definite over millions of steps, where the
+  subtraction loses it after long gaps with precise measurements.
+
+Any Gaussian filter can gate outliers: with ``gate=p`` a measurement whose
+NIS exceeds the χ²(dof) quantile ``p`` is not used (that run only predicts)
+and the step info flags it in ``gated``.
 
 Every ``step`` returns ``(state, info)`` with the same info keys in every
 filter:
@@ -29,6 +39,10 @@ filter:
     True where λ_k > 1 (the filter faded its memory this step).
 ``repaired`` (*b,)
     True where a covariance had to be repaired to stay positive definite.
+``gated`` (*b,)
+    True where the χ² gate rejected the measurement: the estimate is the
+    prediction, while ``innovation``, ``S``, ``nis``, ``dof`` and ``loglik``
+    describe the rejected measurement.  Always False without a gate.
 ``pred_mean``, ``pred_cov``, ``cross_cov``
     Predicted mean and covariance and cov(x_{k−1}, x⁻_k), kept by
     :func:`pursuit.run` only when asked, for the RTS smoother.
@@ -46,6 +60,7 @@ import numpy as np
 
 from .._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, mv, numerical_jacobian, quad, symmetrize
 from .._validation import in_range, nonnegative
+from .gating import chi2_gate_thresholds
 from ..gaussian import Gaussian
 from ..rng import RNGLike
 from .fading import Constant, Fade, FadingContext, FadingStrategy, NoFading
@@ -149,8 +164,9 @@ class _Measured:
     zp: np.ndarray  # predicted measurement (*b, m)
     Pzz: np.ndarray  # H P⁻ Hᵀ or its sigma-point analogue, without R
     Pxz: np.ndarray  # P⁻ Hᵀ or the sigma-point cross-covariance
-    H: np.ndarray | None  # linearisation for the Joseph form (None for sigma-point filters)
+    H: np.ndarray | None  # linearisation for the Joseph form (statistical for sigma-point filters)
     repaired: np.ndarray | None = None
+    D: np.ndarray | None = None  # linearisation-error covariance Pzz − H P⁻ Hᵀ (sigma-point filters)
 
 
 @dataclass(frozen=True)
@@ -161,8 +177,11 @@ class _GaussianFilter:
     measurement: Any
     fading: FadingStrategy = NoFading
     name: str = ""
+    gate: float | None = field(default=None, kw_only=True)
 
     def __post_init__(self) -> None:
+        if self.gate is not None:
+            in_range("gate", self.gate, 0.0, 1.0, low_open=True, high_open=True)
         for attr in ("f", "cov"):
             if not callable(getattr(self.motion, attr, None)):
                 raise TypeError(f"motion model {type(self.motion).__name__} has no method {attr}()")
@@ -238,12 +257,16 @@ class _GaussianFilter:
             valid = valid & ~np.asarray(fade.skip, dtype=bool)[..., None]
         meas = self._measure(pred.mean, P_pred, k)
         mean, cov, info = _update(pred.mean, P_pred, z, valid, meas, self.measurement, k)
+        gated = np.zeros(batch, dtype=bool)
+        if self.gate is not None:
+            mean, cov, gated = _apply_gate(self.gate, info, pred.mean, P_pred, mean, cov)
 
         if cov.ndim == 2 and batch:
             cov = np.broadcast_to(cov, (*batch, *cov.shape))
         info["fading"] = np.broadcast_to(lam, batch)
         info["faded"] = np.broadcast_to(lam > 1.0, batch)
         info["repaired"] = _any_repaired(batch, pred.repaired, meas.repaired)
+        info["gated"] = gated
         info["pred_mean"] = pred.mean
         info["pred_cov"] = P_pred
         info["cross_cov"] = pred.cross
@@ -275,6 +298,19 @@ def _scale(lam: np.ndarray, P: np.ndarray) -> np.ndarray:
     return lam[..., None, None] * P
 
 
+def _apply_gate(gate, info, x_pred, P_pred, mean, cov):
+    """Keep the prediction where NIS exceeds the χ²(dof) quantile ``gate``."""
+    nis, dof = info["nis"], info["dof"]
+    thresholds = chi2_gate_thresholds(gate, info["innovation"].shape[-1])
+    gated = np.asarray(nis > thresholds[dof])  # NaN NIS (nothing measured) is never gated
+    if not gated.any():
+        return mean, cov, gated
+    n = mean.shape[-1]
+    mean = np.where(gated[..., None], x_pred, mean)
+    cov = np.where(gated[..., None, None], np.broadcast_to(P_pred, (*gated.shape, n, n)), cov)
+    return mean, cov, gated
+
+
 def _any_repaired(batch, *flags) -> np.ndarray:
     out = np.zeros(batch, dtype=bool)
     for f in flags:
@@ -289,7 +325,7 @@ def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k):
     m = R.shape[-1]
     batch = x_pred.shape[:-1]
     nu_full = _residual(measurement, z, meas.zp)
-    Pzz, Pxz, H = meas.Pzz, meas.Pxz, meas.H
+    Pzz, Pxz, H, D = meas.Pzz, meas.Pxz, meas.H, meas.D
 
     if valid.all():
         nu = nu_full
@@ -307,6 +343,8 @@ def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k):
         R_eff = np.where(vv, R, 0.0) + np.eye(m) * (~valid)[..., None, :]
         if H is not None:
             H = H * valid[..., :, None]
+        if D is not None:
+            D = np.where(vv, D, 0.0)
         dof = np.broadcast_to(valid.sum(axis=-1), batch)
 
     S = symmetrize(Pzz + R_eff)
@@ -316,7 +354,8 @@ def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k):
     if H is not None:
         n = x_pred.shape[-1]
         A = np.eye(n) - K @ H
-        cov = A @ P_pred @ _t(A) + K @ R_eff @ _t(K)
+        noise = R_eff if D is None else R_eff + D
+        cov = A @ P_pred @ _t(A) + K @ noise @ _t(K)
     else:
         cov = P_pred - K @ S @ _t(K)
     cov = symmetrize(cov)
@@ -453,15 +492,23 @@ class _SigmaPointFilter(_GaussianFilter):
         raise NotImplementedError
 
     def _points(self, x, P):
-        scale, wm, wc = self._weights(x.shape[-1])
+        chi, wm, wc, repaired, _, _ = self._factored_points(x, P)
+        return chi, wm, wc, repaired
+
+    def _factored_points(self, x, P):
+        """Sigma points and weights, with the Cholesky factor L and the unit points ξ (χ_p = x + L ξ_p)."""
+        n = x.shape[-1]
+        scale, wm, wc = self._weights(n)
         L, repaired = cholesky_psd(P)
         cols = scale * np.swapaxes(L, -1, -2)  # row j = scale * column j of L
         cols = np.broadcast_to(cols, (*x.shape[:-1], *cols.shape[-2:]))
         centre = x[..., None, :]
         parts = [centre + cols, centre - cols]
+        unit = [scale * np.eye(n), -scale * np.eye(n)]
         if wm.shape[0] % 2:  # an odd count carries the centre point first
             parts.insert(0, centre)
-        return np.concatenate(parts, axis=-2), wm, wc, repaired
+            unit.insert(0, np.zeros((1, n)))
+        return np.concatenate(parts, axis=-2), wm, wc, repaired, L, np.vstack(unit)
 
     def _predict(self, x, P, k, dt):
         chi, wm, wc, repaired = self._points(x, P)
@@ -475,7 +522,7 @@ class _SigmaPointFilter(_GaussianFilter):
         return _Prediction(mean, propagated, Q, cross, repaired)
 
     def _measure(self, x_pred, P_pred, k):
-        chi, wm, wc, repaired = self._points(x_pred, P_pred)
+        chi, wm, wc, repaired, L, xi = self._factored_points(x_pred, P_pred)
         Z = np.asarray(self.measurement.h(chi, k), dtype=float)
         # Average residuals about the first point so that angles are
         # averaged on the circle, not across the ±π cut.
@@ -485,7 +532,15 @@ class _SigmaPointFilter(_GaussianFilter):
         dX = chi - x_pred[..., None, :]
         Pzz = _t(dZ * wc[:, None]) @ dZ
         Pxz = _t(dX * wc[:, None]) @ dZ
-        return _Measured(zp, Pzz, Pxz, None, repaired)
+        # Statistical linearisation for the Joseph form.  With dX_i = L ξ_i and
+        # Σ wc ξ ξᵀ = I:  G = Σ wc ξ_i dZ_iᵀ = L⁻¹ Pxz,  H = Pxzᵀ P⁻⁻¹ = Gᵀ L⁻¹,
+        # and the residuals e_i = dZ_i − Gᵀ ξ_i give D = Σ wc e eᵀ = Pzz − H P⁻ Hᵀ
+        # as a sum of outer products (positive semidefinite for wc ≥ 0).
+        G = np.einsum("p,pi,...pj->...ij", wc, xi, dZ)
+        E = dZ - np.einsum("pi,...ij->...pj", xi, G)
+        D = _t(E * wc[:, None]) @ E
+        H = _t(np.linalg.solve(_t(L), G))
+        return _Measured(zp, Pzz, Pxz, H, repaired, D)
 
     def _linearize(self, pred, k):
         # Statistical linearisation about the unfaded prediction P̄ + Q:

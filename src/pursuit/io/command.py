@@ -1,0 +1,230 @@
+"""``pursuit track DATA --config MODEL.toml``: a configured filter on recorded or live data.
+
+Two modes:
+
+* **batch** (a file): every record is read and checked first.  Any bad
+  record stops the command with exit code 2 and *nothing* is written (every
+  problem is listed on standard error with its line and field); with
+  ``--skip-bad`` the bad records are listed, skipped, and the estimates
+  written.  The output file appears whole or not at all (written to a
+  temporary file beside it, then renamed).
+* **stream** (``-``, standard input, or ``--stream``): records are filtered
+  as they arrive and each estimate is written and flushed as soon as its time
+  step is complete.  A bad record stops the command with exit code 2 after
+  the estimates already written, unless ``--skip-bad``.
+
+Exit codes: 0 success, 2 bad input (model file, data, arguments), 1 an
+unexpected failure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import os
+import sys
+import tempfile
+from pathlib import Path
+from typing import BinaryIO, TextIO
+
+from .model import TrackModel, load_track_model
+from .records import FORMATS, BadRecord, read_records
+from .steps import OUT_OF_ORDER, Dropped
+from .tracker import Estimate, stream_records, track_records
+from .writers import OUTPUT_FORMATS, make_writer
+
+__all__ = ["add_track_parser", "run_track"]
+
+EXIT_OK = 0
+EXIT_BAD_INPUT = 2
+
+_EXTENSIONS = {".csv": "csv", ".jsonl": "jsonl", ".ndjson": "jsonl", ".json": "jsonl"}
+
+
+def add_track_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Add the ``track`` subcommand to the ``pursuit`` parser."""
+    tp = sub.add_parser(
+        "track",
+        help="run a configured filter on recorded (CSV) or live (JSON Lines) measurements",
+        description="Run the filter configured in MODEL.toml on measurements and write its estimates.",
+    )
+    tp.add_argument("data", help="measurements: a .csv or .jsonl file, or - for standard input (a live stream)")
+    tp.add_argument("-c", "--config", required=True, help="MODEL.toml: motion model, sensors, prior and filter")
+    tp.add_argument("-o", "--output", help="estimates file (default: standard output)")
+    tp.add_argument("--format", choices=FORMATS, help="input format (default: from the extension; jsonl for standard input)")
+    tp.add_argument("--to", choices=OUTPUT_FORMATS, help="output format (default: from the output's extension, else the input format)")
+    mode = tp.add_mutually_exclusive_group()
+    mode.add_argument("--stream", dest="stream", action="store_true", default=None, help="filter records as they arrive and flush each estimate (default for standard input)")
+    mode.add_argument("--batch", dest="stream", action="store_false", help="read everything first and write all or nothing (default for files)")
+    tp.add_argument("--skip-bad", action="store_true", help="report bad records, skip them and go on (default: stop with exit code 2)")
+    tp.add_argument(
+        "--out-of-order",
+        choices=OUT_OF_ORDER,
+        help="records earlier than a time already reached: sort them in (batch default), drop them with a warning (stream default), or treat them as bad",
+    )
+    return tp
+
+
+class _Usage(Exception):
+    """A bad combination of arguments."""
+
+
+def run_track(args: argparse.Namespace, *, stdin: BinaryIO | None = None, stdout: TextIO | None = None, stderr: TextIO | None = None) -> int:
+    """Run ``pursuit track`` with parsed arguments; returns the exit code.
+
+    ``stdin``, ``stdout`` and ``stderr`` default to the process's streams
+    (standard input is read as bytes).  A bad model file raises
+    :class:`pursuit.experiment.ConfigError`, which the CLI reports with exit
+    code 2.
+    """
+    stdin = stdin if stdin is not None else sys.stdin.buffer
+    stdout = stdout if stdout is not None else sys.stdout
+    stderr = stderr if stderr is not None else sys.stderr
+    try:
+        in_fmt, out_fmt, streaming, policy = _settings(args)
+    except _Usage as e:
+        print(f"pursuit track: error: {e}", file=stderr)
+        return EXIT_BAD_INPUT
+    model = load_track_model(args.config)
+    source = "<stdin>" if args.data == "-" else args.data
+    try:
+        fh = stdin if args.data == "-" else open(args.data, "rb")
+    except OSError as e:
+        print(f"pursuit track: error: {args.data}: cannot read: {e.strerror or e}", file=stderr)
+        return EXIT_BAD_INPUT
+    try:
+        lines = iter(fh.readline, b"") if streaming else fh
+        records = read_records(lines, in_fmt)
+        if streaming:
+            return _stream(records, model, args, out_fmt, policy, source, stdout, stderr)
+        return _batch(records, model, args, out_fmt, policy, source, stdout, stderr)
+    finally:
+        if fh is not stdin:
+            fh.close()
+
+
+def _settings(args) -> tuple[str, str, bool, str]:
+    if args.format:
+        in_fmt = args.format
+    elif args.data == "-":
+        in_fmt = "jsonl"
+    else:
+        in_fmt = _EXTENSIONS.get(Path(args.data).suffix.lower())
+        if in_fmt is None:
+            raise _Usage(f"{args.data}: cannot tell the format from the extension; use --format csv or --format jsonl")
+    if args.to:
+        out_fmt = args.to
+    elif args.output and Path(args.output).suffix.lower() in _EXTENSIONS:
+        out_fmt = _EXTENSIONS[Path(args.output).suffix.lower()]
+    else:
+        out_fmt = in_fmt
+    streaming = args.data == "-" if args.stream is None else args.stream
+    policy = args.out_of_order or ("drop" if streaming else "sort")
+    if streaming and policy == "sort":
+        raise _Usage("--out-of-order sort needs the whole input before filtering; use it without --stream (drop or error when streaming)")
+    return in_fmt, out_fmt, streaming, policy
+
+
+def _report(stderr: TextIO, source: str, item: BadRecord | Dropped, kind: str) -> None:
+    field = "time" if isinstance(item, Dropped) else item.field
+    print(f"pursuit track: {kind}: {source}:{item.line}: {field}: {item.message}", file=stderr)
+
+
+# --------------------------------------------------------------------------
+# batch: all or nothing
+# --------------------------------------------------------------------------
+def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, stderr) -> int:
+    result = track_records(records, model, out_of_order=policy)
+    for item in result.dropped:
+        _report(stderr, source, item, "warning")
+    kind = "skipped" if args.skip_bad else "error"
+    for item in result.problems:
+        _report(stderr, source, item, kind)
+    if result.problems and not args.skip_bad:
+        n = len(result.problems)
+        print(
+            f"pursuit track: {n} bad record{'s' if n != 1 else ''} in {source}; nothing written "
+            "(fix them, or use --skip-bad to skip them)",
+            file=stderr,
+        )
+        return EXIT_BAD_INPUT
+    buffer = io.StringIO()
+    writer = make_writer(out_fmt, buffer, model.state_labels)
+    writer.start()
+    for est in result.estimates:
+        writer.write(est)
+    text = buffer.getvalue()
+    if args.output:
+        try:
+            _write_atomically(Path(args.output), text)
+        except OSError as e:
+            print(f"pursuit track: error: {args.output}: cannot write: {e.strerror or e}", file=stderr)
+            return EXIT_BAD_INPUT
+    else:
+        stdout.write(text)
+        stdout.flush()
+    if result.problems:
+        print(f"pursuit track: skipped {len(result.problems)} bad record(s) in {source}", file=stderr)
+    return EXIT_OK
+
+
+def _write_atomically(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file renamed into place."""
+    directory = path.parent if str(path.parent) else Path(".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+# --------------------------------------------------------------------------
+# stream: estimate by estimate
+# --------------------------------------------------------------------------
+def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, stderr) -> int:
+    if args.output:
+        try:
+            out = open(args.output, "w", encoding="utf-8", newline="")
+        except OSError as e:
+            print(f"pursuit track: error: {args.output}: cannot write: {e.strerror or e}", file=stderr)
+            return EXIT_BAD_INPUT
+    else:
+        out = stdout
+    written = skipped = 0
+    try:
+        writer = make_writer(out_fmt, out, model.state_labels, flush_each=True)
+        writer.start()
+        out.flush()
+        for event in stream_records(records, model, out_of_order=policy, stop_at_bad=not args.skip_bad):
+            if isinstance(event, Estimate):
+                writer.write(event)
+                written += 1
+            elif isinstance(event, Dropped):
+                _report(stderr, source, event, "warning")
+                stderr.flush()
+            elif args.skip_bad:
+                _report(stderr, source, event, "skipped")
+                stderr.flush()
+                skipped += 1
+            else:
+                _report(stderr, source, event, "error")
+                print(
+                    f"pursuit track: stopped at the first bad record, after {written} estimate{'s' if written != 1 else ''} "
+                    "from the records before it (use --skip-bad to go on)",
+                    file=stderr,
+                )
+                return EXIT_BAD_INPUT
+    finally:
+        if out is not stdout:
+            out.close()
+    if skipped:
+        print(f"pursuit track: skipped {skipped} bad record(s) in {source}", file=stderr)
+    return EXIT_OK

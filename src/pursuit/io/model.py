@@ -1,0 +1,401 @@
+"""MODEL.toml: the motion model, the sensors, the prior and the filter for ``pursuit track``.
+
+A model file names everything a filter needs to run on recorded data::
+
+    [motion]                  # cv or ca, with its parameters
+    type = "cv"
+    ndim = 2
+    q = 0.01
+
+    [[sensors]]               # one table per sensor; its id is the CSV/JSON "sensor" field
+    id = "A"
+    type = "range"            # range | toa | bearing | position
+    position = [0.0, 0.0]
+    sigma = 1.0
+
+    [prior]
+    mean = [10.0, 0.5, 40.0, 0.8]
+    cov = [4.0, 0.25, 4.0, 0.25]
+    time = 0.0                # optional: the time the prior refers to
+
+    [filter]                  # any registered filter (`pursuit list filters`) and its parameters
+    type = "ekf"
+    gate = 0.999
+
+Loading checks the whole file and reports the first problem as one line that
+names the file, the line and the field (:class:`pursuit.experiment.ConfigError`).
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from .. import registry
+from ..experiment import ConfigError, locate
+from ..gaussian import Gaussian
+from ..models.measurement import LinearGaussian, RangeSensors, TimeOfArrival
+from ..models.motion import ConstantAcceleration, ConstantVelocity
+from ..models.sensors import BearingSensors, stack
+from ..registry import REQUIRED, Component, Param
+
+__all__ = ["Sensor", "TrackModel", "load_track_model", "build_track_model", "SENSOR_TYPES", "DEFAULT_VALID"]
+
+SENSOR_TYPES = ("range", "toa", "bearing", "position")
+DEFAULT_VALID = (-1.0e9, 1.0e9)
+"""Accepted measurement values unless a sensor sets ``valid``: anything
+outside is a bad record (it would only overflow the filter)."""
+
+_SECTIONS = ("motion", "sensors", "prior", "filter", "track")
+_SENSOR_ID = re.compile(r"^[^\s,\"#][^,\"\r\n]*(?<!\s)$")
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """One configured sensor.
+
+    Attributes
+    ----------
+    id
+        The name records use in their ``sensor`` field.
+    type
+        ``"range"``, ``"toa"``, ``"bearing"`` or ``"position"``.
+    dim
+        Number of components a record of this sensor carries.
+    start
+        Where its block starts in the filter's measurement vector.
+    valid
+        ``(low, high)``: values outside are bad records.
+    """
+
+    id: str
+    type: str
+    dim: int
+    start: int
+    valid: tuple[float, float]
+
+    @property
+    def block(self) -> slice:
+        """Its slice of the measurement vector."""
+        return slice(self.start, self.start + self.dim)
+
+
+@dataclass(frozen=True)
+class TrackModel:
+    """A loaded, validated MODEL.toml.
+
+    Attributes
+    ----------
+    name
+        Label (the file stem unless ``[track] name`` sets one).
+    motion, measurement
+        The models the filter uses; ``measurement`` stacks every sensor.
+    prior
+        Gaussian prior on the state.
+    prior_time
+        Time the prior refers to, or None: then the first step is taken to
+        come ``dt`` after the prior.
+    dt
+        The motion model's nominal interval (s).
+    sensors
+        Sensors by id, in file order.
+    state_labels, position_indices, velocity_indices
+        State layout.
+    filter
+        The filter, built through the registry.
+    seed
+        Seed for filters that draw random numbers (particle filters).
+    path
+        The file it came from.
+    """
+
+    name: str
+    motion: Any
+    measurement: Any
+    prior: Gaussian
+    prior_time: float | None
+    dt: float
+    sensors: Mapping[str, Sensor]
+    state_labels: tuple[str, ...]
+    position_indices: tuple[int, ...]
+    velocity_indices: tuple[int, ...]
+    filter: Any
+    seed: int
+    path: Path | None = None
+
+    @property
+    def measurement_dim(self) -> int:
+        """Length of the stacked measurement vector."""
+        return sum(s.dim for s in self.sensors.values())
+
+
+@dataclass(frozen=True)
+class _ScenarioView:
+    """What a registered filter builder may read from its ``scenario`` argument."""
+
+    name: str
+    motion: Any
+    measurement: Any
+    prior: Gaussian
+    dt: float
+    state_labels: tuple[str, ...]
+    position_indices: tuple[int, ...]
+    velocity_indices: tuple[int, ...]
+
+
+# --------------------------------------------------------------------------
+# parameters of each section
+# --------------------------------------------------------------------------
+def _at_least_one(field: str, v: int) -> int:
+    if not 1 <= v <= 3:
+        raise ValueError(f"{field}: must be 1, 2 or 3, got {v}")
+    return v
+
+
+def _positive(field: str, v: float) -> float:
+    if not v > 0:
+        raise ValueError(f"{field}: must be positive, got {v!r}")
+    return v
+
+
+def _sigma(field: str, v: Any) -> np.ndarray:
+    arr = registry.Param("sigma", "vector").convert(field, v)
+    if arr.size == 0 or np.any(arr <= 0):
+        raise ValueError(f"{field}: noise standard deviations must be positive, got {v!r}")
+    return arr
+
+
+def _valid(field: str, v: np.ndarray) -> tuple[float, float]:
+    if v.shape != (2,) or not v[0] < v[1]:
+        raise ValueError(f"{field}: expected [low, high] with low < high, got {v.tolist()}")
+    return float(v[0]), float(v[1])
+
+
+def _sensor_id(field: str, v: str) -> str:
+    if not _SENSOR_ID.match(v):
+        raise ValueError(
+            f"{field}: {v!r} is not a usable sensor id (non-empty, no commas, quotes or line breaks, "
+            "no spaces at either end, not starting with '#')"
+        )
+    return v
+
+
+MOTION_PARAMS = (
+    Param("type", "str", REQUIRED, "motion model", choices=("cv", "ca")),
+    Param("ndim", "int", 2, "spatial axes (1, 2 or 3)", check=_at_least_one),
+    Param("q", "float", REQUIRED, "acceleration (cv) or jerk (ca) noise intensity", check=_positive),
+    Param("noise", "str", "discrete", "white-noise model", choices=("discrete", "continuous")),
+    Param("dt", "float", 1.0, "nominal interval, s: the first step's dt when [prior] has no time", check=_positive),
+)
+
+SENSOR_PARAMS = (
+    Param("id", "str", REQUIRED, "the sensor's name in the data", check=_sensor_id),
+    Param("type", "str", REQUIRED, "what it measures", choices=SENSOR_TYPES),
+    Param("position", "vector", None, "sensor position (range, toa, bearing)"),
+    Param("sigma", "any", REQUIRED, "noise standard deviation (m, s or rad; per axis for position)", check=_sigma),
+    Param("c", "float", None, "signal speed for toa, m/s (default 1500)", check=_positive),
+    Param("valid", "vector", None, f"[low, high] accepted values (default {list(DEFAULT_VALID)})", check=_valid),
+)
+
+PRIOR_PARAMS = (
+    Param("mean", "vector", REQUIRED, "prior mean of the state"),
+    Param("cov", "matrix", REQUIRED, "prior covariance (matrix, or its diagonal)"),
+    Param("time", "float", None, "time the prior refers to (default: one nominal dt before the first record)"),
+)
+
+TRACK_PARAMS = (
+    Param("name", "str", "", "label for the output (default: the file name)"),
+    Param("seed", "int", 0, "seed for filters that draw random numbers"),
+)
+
+
+def _resolve(table: Any, name: str, params: tuple[Param, ...]) -> dict[str, Any]:
+    if not isinstance(table, dict):
+        raise ValueError(f"{name}: expected a table")
+    return Component("section", name, "", params, dict).resolve(table, name)
+
+
+# --------------------------------------------------------------------------
+# loading
+# --------------------------------------------------------------------------
+def load_track_model(path: str | Path) -> TrackModel:
+    """Read and validate a MODEL.toml.
+
+    Raises
+    ------
+    ConfigError
+        For a missing or unreadable file, invalid TOML, an unknown section or
+        key, a wrong type or an impossible value; the message names the file,
+        the line when it can be found, and the field.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(path, "file not found") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ConfigError(path, f"cannot read file: {e}") from None
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        m = re.search(r"line (\d+)", str(e))
+        raise ConfigError(path, f"invalid TOML: {e}", int(m.group(1)) if m else None) from None
+    try:
+        return build_track_model(doc, name=path.stem, path=path)
+    except ValueError as e:
+        msg = str(e)
+        raise ConfigError(path, msg, locate(text, msg.split(":", 1)[0])) from None
+
+
+def build_track_model(doc: Mapping[str, Any], name: str = "track", path: Path | None = None) -> TrackModel:
+    """Build a :class:`TrackModel` from a parsed document; raises ``ValueError`` naming the field."""
+    for key in doc:
+        if key not in _SECTIONS:
+            raise ValueError(f"{key}: unknown section (known: {', '.join(_SECTIONS)})")
+    for key in ("motion", "sensors", "prior", "filter"):
+        if key not in doc:
+            raise ValueError(f"{key}: required section is missing")
+    track = _resolve(doc.get("track", {}), "track", TRACK_PARAMS)
+    motion, labels = _build_motion(_resolve(doc["motion"], "motion", MOTION_PARAMS))
+    n = motion.dim
+    sensors, measurement = _build_sensors(doc["sensors"], motion)
+    prior_vals = _resolve(doc["prior"], "prior", PRIOR_PARAMS)
+    prior = _build_prior(prior_vals, n)
+    view = _ScenarioView(
+        name=track["name"] or name,
+        motion=motion,
+        measurement=measurement,
+        prior=prior,
+        dt=motion.dt,
+        state_labels=labels,
+        position_indices=motion.position_indices,
+        velocity_indices=motion.velocity_indices,
+    )
+    filt = _build_filter(doc["filter"], view)
+    return TrackModel(
+        name=view.name,
+        motion=motion,
+        measurement=measurement,
+        prior=prior,
+        prior_time=prior_vals["time"],
+        dt=motion.dt,
+        sensors=sensors,
+        state_labels=labels,
+        position_indices=motion.position_indices,
+        velocity_indices=motion.velocity_indices,
+        filter=filt,
+        seed=track["seed"],
+        path=path,
+    )
+
+
+def _build_motion(vals: dict[str, Any]):
+    cls = ConstantVelocity if vals["type"] == "cv" else ConstantAcceleration
+    motion = cls(ndim=vals["ndim"], dt=vals["dt"], q=vals["q"], noise=vals["noise"])
+    axes = "xyz"[: vals["ndim"]]
+    per_axis = ("{a}", "v{a}") if vals["type"] == "cv" else ("{a}", "v{a}", "a{a}")
+    labels = tuple(p.format(a=a) for a in axes for p in per_axis)
+    return motion, labels
+
+
+def _build_prior(vals: dict[str, Any], n: int) -> Gaussian:
+    mean = vals["mean"]
+    if mean.shape != (n,):
+        raise ValueError(f"prior.mean: expected {n} values for the state, got {mean.shape[0]}")
+    try:
+        return Gaussian(mean, vals["cov"])
+    except ValueError as e:
+        msg = str(e)
+        raise ValueError(f"prior.{msg}" if msg.startswith(("mean", "cov")) else f"prior.cov: {msg}") from None
+
+
+def _build_sensors(entries: Any, motion: Any) -> tuple[dict[str, Sensor], Any]:
+    if not isinstance(entries, list) or not entries or not all(isinstance(e, dict) for e in entries):
+        raise ValueError("sensors: expected one or more [[sensors]] tables")
+    ndim = motion.ndim
+    pos_idx = motion.position_indices
+    specs = []
+    seen: dict[str, int] = {}
+    for i, entry in enumerate(entries):
+        where = f"sensors[{i}]"
+        v = _resolve(entry, where, SENSOR_PARAMS)
+        if v["id"] in seen:
+            raise ValueError(f"{where}.id: {v['id']!r} is already used by sensors[{seen[v['id']]}]")
+        seen[v["id"]] = i
+        kind = v["type"]
+        if kind == "position":
+            if v["position"] is not None:
+                raise ValueError(f"{where}.position: a 'position' sensor measures the target's position and has none of its own")
+            if v["sigma"].size not in (1, ndim):
+                raise ValueError(f"{where}.sigma: expected 1 or {ndim} values, got {v['sigma'].size}")
+        else:
+            if v["position"] is None:
+                raise ValueError(f"{where}.position: required for a {kind!r} sensor")
+            if v["position"].shape != (ndim,):
+                raise ValueError(f"{where}.position: expected {ndim} coordinates (motion.ndim), got {v['position'].size}")
+            if v["sigma"].size != 1:
+                raise ValueError(f"{where}.sigma: expected one number for a {kind!r} sensor")
+        if kind == "bearing" and ndim != 2:
+            raise ValueError(f"{where}.type: bearing sensors need a 2-D motion model (motion.ndim = 2)")
+        if v["c"] is not None and kind != "toa":
+            raise ValueError(f"{where}.c: only a 'toa' sensor has a signal speed")
+        c = 1500.0 if v["c"] is None else v["c"]
+        specs.append((v, c))
+
+    # One model per sensor type (and per signal speed for toa), in order of first appearance.
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for v, c in specs:
+        groups.setdefault((v["type"], c if v["type"] == "toa" else None), []).append(v)
+    parts = []
+    sensors: dict[str, Sensor] = {}
+    start = 0
+    order = {v["id"]: i for i, (v, _) in enumerate(specs)}
+    for (kind, c), members in groups.items():
+        if kind == "position":
+            n = motion.dim
+            rows, variances = [], []
+            for v in members:
+                sig = np.broadcast_to(v["sigma"], (ndim,))
+                H = np.zeros((ndim, n))
+                H[np.arange(ndim), list(pos_idx)] = 1.0
+                rows.append(H)
+                variances.extend((sig**2).tolist())
+            part = LinearGaussian(np.vstack(rows), np.diag(variances))
+        else:
+            where = f"sensors[{order[members[0]['id']]}]"
+            positions = np.array([v["position"] for v in members])
+            sigmas = np.array([float(v["sigma"][0]) for v in members])
+            try:
+                if kind == "range":
+                    part = RangeSensors(positions, sigmas, pos_idx)
+                elif kind == "toa":
+                    part = TimeOfArrival(positions, sigmas, pos_idx, c=c)
+                else:
+                    part = BearingSensors(positions, sigmas, pos_idx)
+            except ValueError as e:  # pragma: no cover - the checks above catch these first
+                raise ValueError(f"{where}.{e}") from None
+        parts.append(part)
+        for v in members:
+            dim = ndim if kind == "position" else 1
+            valid = DEFAULT_VALID if v["valid"] is None else v["valid"]
+            sensors[v["id"]] = Sensor(v["id"], kind, dim, start, valid)
+            start += dim
+    ordered = {v["id"]: sensors[v["id"]] for v, _ in specs}
+    return ordered, stack(parts)
+
+
+def _build_filter(table: Any, view: _ScenarioView) -> Any:
+    if not isinstance(table, dict):
+        raise ValueError("filter: expected a table")
+    values = dict(table)
+    kind = values.pop("type", None)
+    if kind is None:
+        raise ValueError("filter.type: required (see `pursuit list filters`)")
+    comp = registry.get("filter", kind, "filter.type")
+    return comp.build(scenario=view, where="filter", **comp.resolve(values, "filter"))
+

@@ -1,0 +1,179 @@
+"""Records to filter steps: grouping by time, and the out-of-order policy.
+
+All records with the same time form one filter step; their sensors fill
+their blocks of the measurement vector and every sensor that did not report
+stays NaN (missing), so several sensors at one time and missing sensors need
+nothing special.  A step is complete when a record with a later time arrives
+or the input ends.
+
+Records that arrive out of time order are handled by a policy:
+
+``sort``
+    (files only) records are sorted by time before filtering; records with
+    equal times keep their file order.
+``drop``
+    a record older than the step being assembled is dropped with a warning
+    (the default for live streams: a late packet cannot change estimates
+    already written).
+``error``
+    such a record is a bad record.
+
+Whatever the policy, a record at or before the prior's time, and a second
+record of one sensor at one time, are bad records.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterable, Iterator, Mapping
+
+import numpy as np
+
+from .records import BadRecord, Record, check_record
+
+__all__ = ["Step", "Dropped", "OUT_OF_ORDER", "assemble_steps", "sort_records"]
+
+OUT_OF_ORDER = ("sort", "drop", "error")
+
+
+@dataclass(frozen=True)
+class Step:
+    """One filter step: every record at one time.
+
+    Attributes
+    ----------
+    time
+        The step's time, s.
+    z
+        ``(m,)`` measurement vector; NaN where no sensor reported.
+    lines
+        Input lines of the records in this step.
+    sensors
+        Ids of the sensors that reported.
+    """
+
+    time: float
+    z: np.ndarray
+    lines: tuple[int, ...]
+    sensors: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Dropped:
+    """A late record dropped under the ``drop`` policy (a warning, not an error)."""
+
+    line: int
+    message: str
+
+    def __str__(self) -> str:
+        return f"line {self.line}: time: {self.message}"
+
+
+def sort_records(items: Iterable[Record | BadRecord]) -> list[Record | BadRecord]:
+    """Bad records first, then the good ones sorted by time.
+
+    The sort is stable, so records with equal times keep their input order;
+    bad records are reported by line number, so their place does not matter.
+    """
+    items = list(items)
+    bad = [r for r in items if isinstance(r, BadRecord)]
+    good = sorted((r for r in items if isinstance(r, Record)), key=lambda r: r.time)
+    return [*bad, *good]
+
+
+def assemble_steps(
+    items: Iterable[Record | BadRecord],
+    sensors: Mapping[str, object],
+    measurement_dim: int,
+    *,
+    after: float | None = None,
+    policy: str = "error",
+    stop_at_bad: bool = False,
+) -> Iterator[Step | BadRecord | Dropped]:
+    """Group records into steps, lazily (one step of look-ahead).
+
+    Parameters
+    ----------
+    items
+        Records in arrival order (sort them first for the ``sort`` policy);
+        bad records are passed through.
+    sensors
+        The configured sensors by id (``dim``, ``valid``, ``block``).
+    measurement_dim
+        Length of the measurement vector.
+    after
+        The prior's time: records must come strictly later.
+    policy
+        ``"drop"`` or ``"error"`` for a record older than the step being
+        assembled (``"sort"`` behaves as ``"error"``: after sorting, no
+        record is late).
+    stop_at_bad
+        End at the first bad record, as if the input ended just before it:
+        the step being assembled is yielded, then the bad record.
+
+    Yields
+    ------
+    Step, BadRecord or Dropped
+        In input order; a step is yielded when a later record arrives or the
+        input ends.
+    """
+    if policy not in OUT_OF_ORDER:
+        raise ValueError(f"policy: must be one of {', '.join(OUT_OF_ORDER)}, got {policy!r}")
+    pending: list[Record] = []
+    pending_time: float | None = None
+    for item in items:
+        bad = _problem(item, sensors, after, pending, pending_time, policy)
+        if isinstance(bad, Dropped):
+            yield bad
+            continue
+        if bad is not None:
+            if stop_at_bad:
+                if pending:
+                    yield _make_step(pending, sensors, measurement_dim)
+                yield bad
+                return
+            yield bad
+            continue
+        rec = item
+        if pending_time is not None and rec.time > pending_time:
+            yield _make_step(pending, sensors, measurement_dim)
+            after = pending_time
+            pending = []
+        pending.append(rec)
+        pending_time = rec.time
+    if pending:
+        yield _make_step(pending, sensors, measurement_dim)
+
+
+def _problem(item, sensors, after, pending, pending_time, policy) -> BadRecord | Dropped | None:
+    """Why ``item`` cannot join the steps, or None when it can."""
+    if isinstance(item, BadRecord):
+        return item
+    rec = check_record(item, sensors)
+    if isinstance(rec, BadRecord):
+        return rec
+    if after is not None and rec.time <= after and not pending:
+        return BadRecord(rec.line, "time", f"{rec.time!r} is not after the prior's time {after!r}")
+    if pending_time is not None and rec.time < pending_time:
+        message = f"{rec.time!r} is earlier than time {pending_time!r} already reached (line {pending[0].line})"
+        if policy == "drop":
+            return Dropped(rec.line, f"{message}; late record dropped")
+        return BadRecord(rec.line, "time", f"out of order: {message}")
+    if rec.sensor is not None and rec.time == pending_time:
+        twin = next((p for p in pending if p.sensor == rec.sensor), None)
+        if twin is not None:
+            return BadRecord(rec.line, "sensor", f"{rec.sensor!r} already has a measurement at time {rec.time!r} (line {twin.line})")
+    return None
+
+
+def _make_step(records: list[Record], sensors: Mapping[str, object], m: int) -> Step:
+    z = np.full(m, np.nan)
+    for r in records:
+        if r.sensor is not None:
+            z[sensors[r.sensor].block] = r.values
+    return Step(
+        time=records[0].time,
+        z=z,
+        lines=tuple(r.line for r in records),
+        sensors=tuple(r.sensor for r in records if r.sensor is not None),
+    )
