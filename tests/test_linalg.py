@@ -96,3 +96,25 @@ def test_well_conditioned_matrices_keep_the_closed_form_unbatched_too(rng):
     np.testing.assert_allclose(inv_spd(S), np.linalg.inv(S), rtol=1e-10)
     np.testing.assert_allclose(logdet_spd(S), np.linalg.slogdet(S)[1], rtol=1e-12)
     assert np.isfinite(logdet_spd(S[0])) and inv_spd(S[0]).shape == (3, 3)
+
+
+def _spd(eigenvalues, rng, batch=50):
+    """SPD matrices with known eigenvalues and random eigenvectors."""
+    m = len(eigenvalues)
+    Q, _ = np.linalg.qr(rng.standard_normal((batch, m, m)))
+    S = Q @ (np.asarray(eigenvalues)[:, None] * np.swapaxes(Q, -1, -2))
+    return 0.5 * (S + np.swapaxes(S, -1, -2)), Q
+
+
+@pytest.mark.parametrize("m", [2, 3, 4])
+def test_inverse_and_logdet_stay_accurate_with_two_tiny_eigenvalues(m, rng):
+    # Three precise TOA sensors and a target known much better along some directions give S
+    # with eigenvalues like (0.6, 1e-12, 1e-12): the 3x3 cofactor determinant errs by eps·κ²
+    # and flips sign; the fallback must keep the inverse and log-determinant accurate.
+    w = np.array([0.6] + [1e-12] * (m - 1))
+    S, Q = _spd(w, rng)
+    true_logdet = np.sum(np.log(w))
+    np.testing.assert_allclose(logdet_spd(S), true_logdet, rtol=1e-3)
+    true_inv = Q @ ((1.0 / w)[:, None] * np.swapaxes(Q, -1, -2))
+    err = np.max(np.abs(inv_spd(S) - true_inv)) / np.max(np.abs(true_inv))
+    assert err < 1e-2
