@@ -1,0 +1,195 @@
+"""``pursuit track`` on the command line: outputs, exit codes, all-or-nothing files, live streams."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pursuit.cli import main
+from pursuit.io import load_track_model, read_records, track_records
+
+from .conftest import EXAMPLES, ROOT
+
+WSN_MODEL = str(EXAMPLES / "wsn-range.toml")
+WSN_CSV = str(EXAMPLES / "data" / "wsn-range.csv")
+WSN_JSONL = str(EXAMPLES / "data" / "wsn-range.jsonl")
+
+
+def _stdin(monkeypatch, data: bytes) -> None:
+    monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BytesIO(data)))
+
+
+def _api_estimates(model_path=WSN_MODEL, data=WSN_CSV, fmt="csv"):
+    with open(data, "rb") as f:
+        return track_records(read_records(f, fmt), load_track_model(model_path)).estimates
+
+
+def test_csv_file_to_stdout_equals_the_api(capsys):
+    assert main(["track", WSN_CSV, "--config", WSN_MODEL]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "time,x,vx,y,vy,var_x,var_vx,var_y,var_vy,nis,dof,flags"
+    rows = [line.split(",") for line in out[1:]]
+    est = _api_estimates()
+    assert len(rows) == len(est)
+    for row, e in zip(rows, est):
+        assert float(row[0]) == e.time
+        assert [float(v) for v in row[1:5]] == e.mean.tolist()  # repr round-trips exactly
+        assert [float(v) for v in row[5:9]] == e.var.tolist()
+        assert int(row[10]) == e.dof and row[11] == ";".join(e.flags)
+
+
+def test_jsonl_output_to_a_file(tmp_path, capsys):
+    out = tmp_path / "est.jsonl"
+    assert main(["track", WSN_CSV, "-c", WSN_MODEL, "-o", str(out)]) == 0
+    assert capsys.readouterr().out == ""
+    objs = [json.loads(line) for line in out.read_text().splitlines()]
+    est = _api_estimates()
+    assert [o["time"] for o in objs] == [e.time for e in est]
+    assert list(objs[0]["state"]) == ["x", "vx", "y", "vy"]
+    assert [list(o["state"].values()) for o in objs] == [e.mean.tolist() for e in est]
+    assert set(objs[0]) == {"time", "state", "var", "nis", "dof", "flags"}
+
+
+BAD_CSV = "time,sensor,value\n1.0,A1,40\n2.0,A9,50\n3.0,A2,inf\n4.0,A3\n5.0,A1,41\n"
+
+
+def test_bad_records_exit_2_list_every_problem_and_write_nothing(tmp_path, capsys):
+    data = tmp_path / "bad.csv"
+    data.write_text(BAD_CSV)
+    out = tmp_path / "est.csv"
+    out.write_text("previous results\n")
+    assert main(["track", str(data), "-c", WSN_MODEL, "-o", str(out)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[:3] == [
+        f"pursuit track: error: {data}:3: sensor: unknown sensor 'A9' (known: A1, A2, A3, A4)",
+        f"pursuit track: error: {data}:4: value: 'inf' is not finite (write nan or leave it empty for a missing value)",
+        f"pursuit track: error: {data}:5: record: expected at least 3 fields (time, sensor, value), got 2",
+    ]
+    assert "3 bad records" in err[3] and "nothing written" in err[3]
+    assert out.read_text() == "previous results\n"  # untouched
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".est")] == []  # no temporary left
+    # to standard output: nothing either
+    assert main(["track", str(data), "-c", WSN_MODEL]) == 2
+    assert capsys.readouterr().out == ""
+
+
+def test_skip_bad_writes_the_good_records(tmp_path, capsys):
+    data = tmp_path / "bad.csv"
+    data.write_text(BAD_CSV)
+    assert main(["track", str(data), "-c", WSN_MODEL, "--skip-bad"]) == 0
+    cap = capsys.readouterr()
+    assert [line.split(",")[0] for line in cap.out.splitlines()[1:]] == ["1.0", "5.0"]
+    assert cap.err.count("pursuit track: skipped: ") == 3
+    assert "skipped 3 bad record(s)" in cap.err
+
+
+@pytest.mark.parametrize(
+    "argv,message",
+    [
+        (["track", "missing.csv", "-c", WSN_MODEL], "missing.csv: cannot read"),
+        (["track", WSN_CSV, "-c", "missing.toml"], "missing.toml: file not found"),
+        (["track", str(EXAMPLES / "wsn-range.toml"), "-c", WSN_MODEL], "cannot tell the format"),
+        (["track", "-", "-c", WSN_MODEL, "--out-of-order", "sort"], "--out-of-order sort needs the whole input"),
+        (["track", WSN_CSV, "-c", WSN_MODEL, "-o", "/nonexistent-dir/x.csv"], "cannot write"),
+    ],
+)
+def test_argument_and_file_problems_exit_2(argv, message, capsys, monkeypatch):
+    _stdin(monkeypatch, b"")
+    assert main(argv) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_a_bad_model_file_exits_2_naming_line_and_field(tmp_path, capsys):
+    bad = tmp_path / "m.toml"
+    bad.write_text(Path(WSN_MODEL).read_text().replace("sigma = 1.0          # m", "sigma = -1.0"))
+    assert main(["track", WSN_CSV, "-c", str(bad)]) == 2
+    assert f"{bad}:15: sensors[0].sigma: noise standard deviations must be positive" in capsys.readouterr().err
+
+
+def test_stdin_is_a_stream_with_jsonl_by_default(capsys, monkeypatch):
+    _stdin(monkeypatch, Path(WSN_JSONL).read_bytes())
+    assert main(["track", "-", "-c", WSN_MODEL]) == 0
+    objs = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [list(o["state"].values()) for o in objs] == [e.mean.tolist() for e in _api_estimates()]
+
+
+def test_a_bad_record_mid_stream_stops_after_the_estimates_before_it(capsys, monkeypatch):
+    lines = Path(WSN_JSONL).read_text().splitlines()
+    lines.insert(10, '{"time": 4.0, "sensor": "A1", "value": "far"}')
+    _stdin(monkeypatch, ("\n".join(lines) + "\n").encode())
+    assert main(["track", "-", "-c", WSN_MODEL]) == 2
+    cap = capsys.readouterr()
+    times = [json.loads(line)["time"] for line in cap.out.splitlines()]
+    before = sorted({json.loads(line)["time"] for line in lines[:10]})
+    assert times == before  # every step before the bad record, including the one it interrupted
+    assert "<stdin>:11: value: expected a number" in cap.err
+    assert f"after {len(before)} estimates" in cap.err
+    _stdin(monkeypatch, ("\n".join(lines) + "\n").encode())
+    assert main(["track", "-", "-c", WSN_MODEL, "--skip-bad"]) == 0
+    assert len(capsys.readouterr().out.splitlines()) == len(_api_estimates())
+
+
+def test_stream_to_csv_file(tmp_path, monkeypatch):
+    _stdin(monkeypatch, Path(WSN_JSONL).read_bytes())
+    out = tmp_path / "est.csv"
+    assert main(["track", "-", "-c", WSN_MODEL, "-o", str(out)]) == 0
+    assert len(out.read_text().splitlines()) == 1 + len(_api_estimates())
+
+
+def _reader(stream, lines):
+    for line in iter(stream.readline, ""):
+        lines.append(line)
+
+
+def test_a_live_stream_gets_each_estimate_as_soon_as_its_step_is_complete():
+    # A real process: records go in one at a time, and the estimate for time t comes out
+    # once a record with a later time arrives, before standard input is closed.
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pursuit.cli", "track", "-", "-c", WSN_MODEL],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+    )
+    lines: list[str] = []
+    reader = threading.Thread(target=_reader, args=(proc.stdout, lines), daemon=True)
+    reader.start()
+
+    def send(obj):
+        proc.stdin.write(json.dumps(obj) + "\n")
+        proc.stdin.flush()
+
+    def wait_for(n, timeout=60.0):
+        import time
+
+        end = time.monotonic() + timeout
+        while len(lines) < n and time.monotonic() < end and proc.poll() is None:
+            time.sleep(0.02)
+        return len(lines)
+
+    try:
+        send({"time": 1.0, "sensor": "A1", "value": 41.5})
+        send({"time": 1.0, "sensor": "A2", "value": 98.3})
+        send({"time": 2.0, "sensor": "A1", "value": 42.0})
+        assert wait_for(1) == 1, proc.stderr.read() if proc.poll() is not None else "no estimate"
+        first = json.loads(lines[0])
+        assert first["time"] == 1.0 and first["dof"] == 2
+        send({"time": 3.0})  # a time-only record closes step 2 and asks for a prediction at 3
+        assert wait_for(2) == 2
+        assert json.loads(lines[1])["time"] == 2.0
+    finally:
+        proc.stdin.close()
+        proc.wait(timeout=60)
+    reader.join(timeout=10)
+    assert proc.returncode == 0
+    assert [json.loads(line)["time"] for line in lines] == [1.0, 2.0, 3.0]
+    assert json.loads(lines[2])["flags"] == ["predict"]

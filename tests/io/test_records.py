@@ -1,0 +1,167 @@
+"""CSV and JSON Lines readers: good records, and a message with line and field for every bad one."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from pursuit.io import BadRecord, Record, check_record, read_csv, read_jsonl, read_records
+from pursuit.io.model import Sensor
+
+
+def _csv(text: str):
+    return list(read_csv(text.encode().splitlines(keepends=True)))
+
+
+def _jsonl(text: str):
+    return list(read_jsonl(text.encode().splitlines(keepends=True)))
+
+
+def test_csv_records_with_one_and_several_values():
+    out = _csv("time,sensor,value\n1.0,A,12.5\n1.0, gps ,3,4\n2.5,B,\n3,C,nan\n")
+    _same(out, [(2, 1.0, "A", (12.5,)), (3, 1.0, "gps", (3.0, 4.0)), (4, 2.5, "B", (math.nan,)), (5, 3.0, "C", (math.nan,))])
+
+
+def _same(records, expected):
+    """Records equal (line, time, sensor, values) tuples, NaN equal to NaN."""
+    assert len(records) == len(expected)
+    for r, (line, t, s, vals) in zip(records, expected):
+        assert isinstance(r, Record)
+        assert (r.line, r.time, r.sensor) == (line, t, s)
+        assert len(r.values) == len(vals)
+        for a, b in zip(r.values, vals):
+            assert (math.isnan(a) and math.isnan(b)) or a == b
+    return True
+
+
+def test_csv_header_variants_comments_blank_lines_crlf_and_bom():
+    text = "\ufeff# recorded 2026-07-01\n\nTime, Sensor, Values\r\n1,A,2\r\n\r\n# a comment\n2,A,3\n"
+    _same(_csv(text), [(4, 1.0, "A", (2.0,)), (7, 2.0, "A", (3.0,))])
+
+
+def test_quoted_csv_fields():
+    _same(_csv('time,sensor,value\n"1.5","A","2.0"\n'), [(2, 1.5, "A", (2.0,))])
+
+
+@pytest.mark.parametrize(
+    "line,field,message",
+    [
+        ("1.0,A", "record", "expected at least 3 fields"),
+        ("", None, None),  # blank: skipped
+        ("abc,A,1", "time", "not a number"),
+        (",A,1", "time", "missing"),
+        ("nan,A,1", "time", "must be a number"),
+        ("1e999,A,1", "time", "too large"),
+        ("1,,1", "sensor", "missing"),
+        ("1,A,inf", "value", "not finite"),
+        ("1,A,-Infinity", "value", "not finite"),
+        ("1,A,1e400", "value", "too large"),
+        ("1,A,1_000", "value", "not a number"),
+        ("1,A,0x10", "value", "not a number"),
+        ('1,"A,2', "record", "malformed CSV"),
+        ("1,A,1\x00", "record", "NUL"),
+    ],
+)
+def test_bad_csv_lines_name_their_line_and_field(line, field, message):
+    out = _csv(f"time,sensor,value\n1,A,1\n{line}\n2,A,2\n")
+    if field is None:
+        assert all(isinstance(r, Record) for r in out)
+        return
+    bad = [r for r in out if isinstance(r, BadRecord)]
+    assert len(bad) == 1
+    assert bad[0].line == 3 and bad[0].field == field
+    assert message in bad[0].message
+    assert str(bad[0]).startswith(f"line 3: {field}: ")
+    # the good lines around it are still read
+    assert [r.line for r in out if isinstance(r, Record)] == [2, 4]
+
+
+def test_a_missing_header_is_reported_and_the_rest_still_read():
+    out = _csv("1,A,1\n2,A,2\n")
+    assert isinstance(out[0], BadRecord) and out[0].field == "header" and out[0].line == 1
+    _same(out[1:], [(2, 2.0, "A", (2.0,))])
+
+
+def test_invalid_utf8_is_a_bad_record():
+    out = list(read_csv([b"time,sensor,value\n", b"1,\xff\xfe,1\n", b"2,A,2\n"]))
+    assert isinstance(out[0], BadRecord) and out[0].line == 2 and "UTF-8" in out[0].message
+    assert isinstance(out[1], Record)
+
+
+def test_jsonl_records():
+    text = (
+        '{"time": 1, "sensor": "A", "value": 2.5}\n'
+        '{"time": 1.5, "sensor": "gps", "values": [3, null]}\n'
+        '\n'
+        '{"time": 2, "sensor": "gps", "value": [NaN, 4]}\n'
+        '{"time": 3}\n'
+    )
+    _same(_jsonl(text), [(1, 1.0, "A", (2.5,)), (2, 1.5, "gps", (3.0, math.nan)), (4, 2.0, "gps", (math.nan, 4.0)), (5, 3.0, None, ())])
+
+
+@pytest.mark.parametrize(
+    "line,field,message",
+    [
+        ("{", "record", "not valid JSON"),
+        ("[1, 2]", "record", "expected an object"),
+        ('"text"', "record", "expected an object"),
+        ('{"sensor": "A", "value": 1}', "time", "missing"),
+        ('{"time": "1", "sensor": "A", "value": 1}', "time", "expected a number"),
+        ('{"time": true, "sensor": "A", "value": 1}', "time", "expected a number"),
+        ('{"time": NaN, "sensor": "A", "value": 1}', "time", "NaN"),
+        ('{"time": 1e999, "sensor": "A", "value": 1}', "time", "not finite"),
+        ('{"time": 1, "sensor": "A", "value": Infinity}', "value", "not finite"),
+        ('{"time": 1, "sensor": "A", "value": -Infinity}', "value", "not finite"),
+        ('{"time": 1, "sensor": "A", "value": 1' + "0" * 400 + "}", "value", "too large"),
+        ('{"time": 1, "sensor": "A", "value": "3"}', "value", "expected a number"),
+        ('{"time": 1, "sensor": "A", "value": [[1]]}', "value", "flat list"),
+        ('{"time": 1, "sensor": "A", "value": []}', "value", "empty"),
+        ('{"time": 1, "sensor": "A"}', "value", "missing"),
+        ('{"time": 1, "value": 3}', "sensor", "missing"),
+        ('{"time": 1, "sensor": 7, "value": 3}', "sensor", "expected a string"),
+        ('{"time": 1, "sensor": "A", "value": 1, "values": [1]}', "values", "either"),
+        ('{"time": 1, "sensor": "A", "vaule": 1}', "vaule", "unknown key"),
+        ("[" * 100000, "record", "not valid JSON"),
+    ],
+)
+def test_bad_jsonl_lines_name_their_line_and_field(line, field, message):
+    out = _jsonl('{"time": 0.5, "sensor": "A", "value": 1}\n' + line + '\n{"time": 9, "sensor": "A", "value": 1}\n')
+    bad = [r for r in out if isinstance(r, BadRecord)]
+    assert len(bad) == 1, out
+    assert (bad[0].line, bad[0].field) == (2, field)
+    assert message in bad[0].message
+    assert [r.line for r in out if isinstance(r, Record)] == [1, 3]
+
+
+SENSORS = {
+    "A": Sensor("A", "range", 1, 0, (0.0, 1000.0)),
+    "gps": Sensor("gps", "position", 2, 1, (-1e9, 1e9)),
+}
+
+
+@pytest.mark.parametrize(
+    "record,field,message",
+    [
+        (Record(4, 1.0, "Z", (1.0,)), "sensor", "unknown sensor 'Z' (known: A, gps)"),
+        (Record(4, 1.0, "A", (1.0, 2.0)), "value", "has 1 component(s), got 2"),
+        (Record(4, 1.0, "gps", (1.0,)), "value", "has 2 component(s), got 1"),
+        (Record(4, 1.0, "A", (-3.0,)), "value", "outside the valid range [0, 1000]"),
+        (Record(4, 1.0, "gps", (0.0, 2e9)), "value", "outside the valid range"),
+    ],
+)
+def test_records_are_checked_against_the_sensors(record, field, message):
+    bad = check_record(record, SENSORS)
+    assert isinstance(bad, BadRecord)
+    assert (bad.line, bad.field) == (4, field)
+    assert message in bad.message
+
+
+def test_good_and_predict_only_records_pass_the_check():
+    for rec in (Record(1, 1.0, "A", (3.0,)), Record(2, 1.0, "gps", (math.nan, 2.0)), Record(3, 2.0, None, ())):
+        assert check_record(rec, SENSORS) is rec
+
+
+def test_unknown_format_is_refused():
+    with pytest.raises(ValueError, match="format"):
+        read_records([], "xml")
