@@ -19,6 +19,10 @@ them for checking:
   echo at about t = 15 s arrives 5 ms late at hydrophone B: a multipath
   outlier that the example's chi-square gate rejects.
 
+``wsn-range-damaged.csv`` is ``wsn-range.csv`` with four lines spoiled the
+way real logs get spoiled (an infinite value, an unknown sensor, a line cut
+short, a garbled number), for the validation example in docs/track.md.
+
 Every number comes from fixed seeds, so running this again gives the shipped
 files (tests/io/test_examples.py checks it).
 """
@@ -100,11 +104,27 @@ def write(outdir: Path, name: str, records, times, truth) -> None:
             f.write(",".join(repr(float(v)) for v in (t, *x)) + "\n")
 
 
+def damage(outdir: Path, name: str) -> None:
+    """NAME-damaged.csv: NAME.csv with four spoiled lines (line numbers count the header as 1)."""
+    lines = (outdir / f"{name}.csv").read_text().splitlines()
+
+    def spoil(lineno: int, how) -> None:
+        t, sensor, value = lines[lineno - 1].split(",")
+        lines[lineno - 1] = how(t, sensor, value)
+
+    spoil(6, lambda t, s, v: f"{t},{s},inf")
+    spoil(11, lambda t, s, v: f"{t},A5,{v}")
+    spoil(17, lambda t, s, v: f"{t},{s}")
+    spoil(25, lambda t, s, v: f"{t},{s},{v[:5]}.{v[5:8]}")
+    (outdir / f"{name}-damaged.csv").write_text("\n".join(lines) + "\n")
+
+
 def main(argv: list[str]) -> int:
     outdir = Path(argv[1]) if len(argv) > 1 else Path(__file__).parent / "data"
     outdir.mkdir(parents=True, exist_ok=True)
     write(outdir, "wsn-range", *wsn_range())
     write(outdir, "underwater-toa", *underwater_toa())
+    damage(outdir, "wsn-range")
     print(f"wrote {outdir}")
     return 0
 

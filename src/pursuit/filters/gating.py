@@ -12,7 +12,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from scipy import stats
 
 __all__ = ["chi2_gate_thresholds"]
 
@@ -34,6 +33,8 @@ def chi2_gate_thresholds(gate: float, max_dof: int) -> np.ndarray:
     """
     if not 0.0 < gate < 1.0:
         raise ValueError(f"gate: must lie in (0, 1), got {gate!r}")
+    from scipy import stats  # only when a gate is used: keeps importing the filters light
+
     out = np.full(max_dof + 1, np.inf)
     if max_dof > 0:
         out[1:] = stats.chi2.ppf(gate, np.arange(1, max_dof + 1))

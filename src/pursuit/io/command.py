@@ -98,9 +98,25 @@ def run_track(args: argparse.Namespace, *, stdin: BinaryIO | None = None, stdout
         if streaming:
             return _stream(records, model, args, out_fmt, policy, source, stdout, stderr)
         return _batch(records, model, args, out_fmt, policy, source, stdout, stderr)
+    except BrokenPipeError:
+        # The reader of our output went away (``| head``): stop quietly, and point
+        # standard output at /dev/null so that the interpreter's final flush
+        # does not complain.
+        _silence(stdout)
+        return EXIT_OK
     finally:
         if fh is not stdin:
             fh.close()
+
+
+def _silence(stream: TextIO) -> None:
+    try:
+        fd = stream.fileno()
+    except (AttributeError, OSError, ValueError):
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, fd)
+    os.close(devnull)
 
 
 def _settings(args) -> tuple[str, str, bool, str]:
