@@ -193,3 +193,34 @@ def test_a_live_stream_gets_each_estimate_as_soon_as_its_step_is_complete():
     assert proc.returncode == 0
     assert [json.loads(line)["time"] for line in lines] == [1.0, 2.0, 3.0]
     assert json.loads(lines[2])["flags"] == ["predict"]
+
+
+def test_ctrl_c_ends_a_live_stream_cleanly():
+    import signal
+    import time
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pursuit.cli", "track", "-", "-c", WSN_MODEL],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+    )
+    lines: list[str] = []
+    reader = threading.Thread(target=_reader, args=(proc.stdout, lines), daemon=True)
+    reader.start()
+    for obj in ({"time": 1.0, "sensor": "A1", "value": 41.5}, {"time": 2.0, "sensor": "A1", "value": 42.0}):
+        proc.stdin.write(json.dumps(obj) + "\n")
+    proc.stdin.flush()
+    end = time.monotonic() + 60
+    while not lines and time.monotonic() < end and proc.poll() is None:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGINT)
+    proc.wait(timeout=60)
+    reader.join(timeout=10)
+    err = proc.stderr.read()
+    proc.stdin.close()
+    assert proc.returncode == 130
+    assert "Traceback" not in err and "interrupted" in err
+    assert [json.loads(line)["time"] for line in lines] == [1.0]

@@ -60,10 +60,10 @@ import numpy as np
 
 from .._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, mv, numerical_jacobian, quad, symmetrize
 from .._validation import in_range, nonnegative
-from .gating import chi2_gate_thresholds
 from ..gaussian import Gaussian
 from ..rng import RNGLike
 from .fading import Constant, Fade, FadingContext, FadingStrategy, NoFading
+from .gating import chi2_gate_thresholds
 
 __all__ = [
     "GaussianState",

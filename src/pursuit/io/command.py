@@ -13,7 +13,8 @@ Two modes:
   step is complete.  A bad record stops the command with exit code 2 after
   the estimates already written, unless ``--skip-bad``.
 
-Exit codes: 0 success, 2 bad input (model file, data, arguments), 1 an
+Exit codes: 0 success, 2 bad input (model file, data, arguments), 130
+interrupted (Ctrl-C stops a stream after the estimates already written), 1 an
 unexpected failure.
 """
 
@@ -37,6 +38,7 @@ __all__ = ["add_track_parser", "run_track"]
 
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130
 
 _EXTENSIONS = {".csv": "csv", ".jsonl": "jsonl", ".ndjson": "jsonl", ".json": "jsonl"}
 
@@ -104,6 +106,9 @@ def run_track(args: argparse.Namespace, *, stdin: BinaryIO | None = None, stdout
         # does not complain.
         _silence(stdout)
         return EXIT_OK
+    except KeyboardInterrupt:  # the usual way to end a live stream: no traceback
+        print("pursuit track: interrupted", file=stderr)
+        return EXIT_INTERRUPTED
     finally:
         if fh is not stdin:
             fh.close()

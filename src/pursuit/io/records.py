@@ -266,7 +266,8 @@ def _json_record(lineno: int, obj: Any) -> Record:
         raise _Bad("record", f'expected an object like {{"time": 1.0, "sensor": "A", "value": 2.5}}, got {_json_type(obj)}')
     for key in obj:
         if key not in _JSON_KEYS:
-            raise _Bad(str(key)[:40], f"unknown key (known: {', '.join(_JSON_KEYS)})")
+            name = key.encode("unicode_escape").decode("ascii")[:40] or "''"  # one printable line
+            raise _Bad(name, f"unknown key (known: {', '.join(_JSON_KEYS)})")
     if "time" not in obj:
         raise _Bad("time", "missing")
     time = _json_number(obj["time"], "time", allow_missing=False)
