@@ -31,6 +31,8 @@ __all__ = [
     "find_experiment",
     "list_experiments",
     "EXPERIMENT_PARAMS",
+    "read_toml",
+    "config_error",
 ]
 
 
@@ -186,6 +188,21 @@ def load_experiment(path: str | Path) -> Experiment:
         line when it can be found, and the field.
     """
     path = Path(path)
+    text, doc = read_toml(path)
+    try:
+        return _build(doc, path)
+    except ValueError as e:
+        raise config_error(path, text, e) from None
+
+
+def read_toml(path: Path) -> tuple[str, dict[str, Any]]:
+    """The text and the parsed document of a TOML file.
+
+    Raises
+    ------
+    ConfigError
+        For a missing or unreadable file or invalid TOML (with its line).
+    """
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -197,11 +214,13 @@ def load_experiment(path: str | Path) -> Experiment:
     except tomllib.TOMLDecodeError as e:
         m = re.search(r"line (\d+)", str(e))
         raise ConfigError(path, f"invalid TOML: {e}", int(m.group(1)) if m else None) from None
-    try:
-        return _build(doc, path)
-    except ValueError as e:
-        msg = str(e)
-        raise ConfigError(path, msg, locate(text, msg.split(":", 1)[0])) from None
+    return text, doc
+
+
+def config_error(path: Path, text: str, error: ValueError) -> ConfigError:
+    """A ``ValueError`` whose message starts with a field name, as a ConfigError at that field's line."""
+    msg = str(error)
+    return ConfigError(path, msg, locate(text, msg.split(":", 1)[0]))
 
 
 def _build(doc: dict[str, Any], path: Path) -> Experiment:

@@ -149,9 +149,8 @@ def _reader(stream, lines):
         lines.append(line)
 
 
-def test_a_live_stream_gets_each_estimate_as_soon_as_its_step_is_complete():
-    # A real process: records go in one at a time, and the estimate for time t comes out
-    # once a record with a later time arrives, before standard input is closed.
+def _start_stream():
+    """A real ``pursuit track -`` process and the list its output lines are appended to."""
     proc = subprocess.Popen(
         [sys.executable, "-m", "pursuit.cli", "track", "-", "-c", WSN_MODEL],
         stdin=subprocess.PIPE,
@@ -163,6 +162,13 @@ def test_a_live_stream_gets_each_estimate_as_soon_as_its_step_is_complete():
     lines: list[str] = []
     reader = threading.Thread(target=_reader, args=(proc.stdout, lines), daemon=True)
     reader.start()
+    return proc, lines, reader
+
+
+def test_a_live_stream_gets_each_estimate_as_soon_as_its_step_is_complete():
+    # A real process: records go in one at a time, and the estimate for time t comes out
+    # once a record with a later time arrives, before standard input is closed.
+    proc, lines, reader = _start_stream()
 
     def send(obj):
         proc.stdin.write(json.dumps(obj) + "\n")
@@ -199,17 +205,7 @@ def test_ctrl_c_ends_a_live_stream_cleanly():
     import signal
     import time
 
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "pursuit.cli", "track", "-", "-c", WSN_MODEL],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        cwd=ROOT,
-    )
-    lines: list[str] = []
-    reader = threading.Thread(target=_reader, args=(proc.stdout, lines), daemon=True)
-    reader.start()
+    proc, lines, reader = _start_stream()
     for obj in ({"time": 1.0, "sensor": "A1", "value": 41.5}, {"time": 2.0, "sensor": "A1", "value": 42.0}):
         proc.stdin.write(json.dumps(obj) + "\n")
     proc.stdin.flush()

@@ -118,19 +118,23 @@ def oracle(text: str):
     return float(t), s, tuple(values)
 
 
-@FUZZ
-@given(st.lists(csv_lines(), max_size=40))
-def test_every_csv_line_is_reported_or_read_exactly(lines):
-    text = "time,sensor,value\n" + "\n".join(lines) + "\n"
-    result = track_records(read_csv(io.BytesIO(text.encode())), MODEL)
-    expected = {i + 2: oracle(line) for i, line in enumerate(lines)}
-    # duplicates: after the stable sort by time, a second record of a sensor at one time is bad
+def _mark_duplicates(expected: dict) -> dict:
+    """After the stable sort by time, a second record of one sensor at one time is bad."""
     good = sorted(((ln, r) for ln, r in expected.items() if isinstance(r, tuple)), key=lambda p: p[1][0])
     seen = set()
     for ln, (t, s, _) in good:
         if (t, s) in seen:
             expected[ln] = "bad"
         seen.add((t, s))
+    return expected
+
+
+@FUZZ
+@given(st.lists(csv_lines(), max_size=40))
+def test_every_csv_line_is_reported_or_read_exactly(lines):
+    text = "time,sensor,value\n" + "\n".join(lines) + "\n"
+    result = track_records(read_csv(io.BytesIO(text.encode())), MODEL)
+    expected = _mark_duplicates({i + 2: oracle(line) for i, line in enumerate(lines)})
     bad_lines = {ln for ln, r in expected.items() if r == "bad"}
     reported = {p.line: p for p in result.problems}
     refused = {ln for ln, p in reported.items() if p.field == "record" and p.message.startswith("rejected at time")}
@@ -236,13 +240,7 @@ def json_oracle(obj):
 def test_every_jsonl_object_is_reported_or_read_exactly(objs):
     lines = [json.dumps(o) for o in objs]  # json.dumps writes NaN and Infinity as the reader accepts them
     result = track_records(read_jsonl(io.BytesIO(("\n".join(lines) + "\n").encode())), MODEL)
-    expected = {i + 1: json_oracle(o) for i, o in enumerate(objs)}
-    good = sorted(((ln, r) for ln, r in expected.items() if isinstance(r, tuple)), key=lambda p: p[1][0])
-    seen = set()
-    for ln, (t, s, _) in good:
-        if (t, s) in seen:
-            expected[ln] = "bad"
-        seen.add((t, s))
+    expected = _mark_duplicates({i + 1: json_oracle(o) for i, o in enumerate(objs)})
     reported = {p.line for p in result.problems if not p.message.startswith("rejected at time")}
     assert reported == {ln for ln, r in expected.items() if r == "bad"}
     times = sorted({r[0] for r in expected.values() if isinstance(r, tuple)} | {objs[ln - 1]["time"] for ln, r in expected.items() if r == "predict"})

@@ -29,7 +29,6 @@ names the file, the line and the field (:class:`pursuit.experiment.ConfigError`)
 from __future__ import annotations
 
 import re
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
@@ -37,7 +36,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from .. import registry
-from ..experiment import ConfigError, locate
+from ..experiment import config_error, read_toml
 from ..gaussian import Gaussian
 from ..models.measurement import LinearGaussian, RangeSensors, TimeOfArrival
 from ..models.motion import ConstantAcceleration, ConstantVelocity
@@ -234,22 +233,11 @@ def load_track_model(path: str | Path) -> TrackModel:
         the line when it can be found, and the field.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(path, "file not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ConfigError(path, f"cannot read file: {e}") from None
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        m = re.search(r"line (\d+)", str(e))
-        raise ConfigError(path, f"invalid TOML: {e}", int(m.group(1)) if m else None) from None
+    text, doc = read_toml(path)
     try:
         return build_track_model(doc, name=path.stem, path=path)
     except ValueError as e:
-        msg = str(e)
-        raise ConfigError(path, msg, locate(text, msg.split(":", 1)[0])) from None
+        raise config_error(path, text, e) from None
 
 
 def build_track_model(doc: Mapping[str, Any], name: str = "track", path: Path | None = None) -> TrackModel:
