@@ -143,6 +143,7 @@ type = "kf"
         ('type = "ekf"', 'type = "ekf"\ngate = 1.5', 24, "filter.gate: must lie in (0, 1)"),
         ('type = "ekf"', 'type = "kf"', 23, "filter.type: KalmanFilter needs a linear measurement model"),
         ("[filter]", "[filters]", 22, "filters: unknown section"),
+        ('type = "ekf"', 'type = "ekf"\n[track]\nseed = -1', 25, "track.seed: must be a non-negative integer"),
     ],
 )
 def test_mistakes_name_file_line_and_field(tmp_path, old, new, line, message):

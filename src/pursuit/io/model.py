@@ -175,6 +175,12 @@ def _valid(field: str, v: np.ndarray) -> tuple[float, float]:
     return float(v[0]), float(v[1])
 
 
+def _nonnegative_int(field: str, v: int) -> int:
+    if v < 0:
+        raise ValueError(f"{field}: must be a non-negative integer, got {v}")
+    return v
+
+
 def _sensor_id(field: str, v: str) -> str:
     if not _SENSOR_ID.match(v):
         raise ValueError(
@@ -209,7 +215,7 @@ PRIOR_PARAMS = (
 
 TRACK_PARAMS = (
     Param("name", "str", "", "label for the output (default: the file name)"),
-    Param("seed", "int", 0, "seed for filters that draw random numbers"),
+    Param("seed", "int", 0, "seed for filters that draw random numbers", check=_nonnegative_int),
 )
 
 
@@ -385,5 +391,9 @@ def _build_filter(table: Any, view: _ScenarioView) -> Any:
     if kind is None:
         raise ValueError("filter.type: required (see `pursuit list filters`)")
     comp = registry.get("filter", kind, "filter.type")
-    return comp.build(scenario=view, where="filter", **comp.resolve(values, "filter"))
+    params = comp.resolve(values, "filter")
+    try:
+        return comp.build(scenario=view, where="filter", **params)
+    except (AttributeError, TypeError) as e:  # a builder that wants more than a track model gives
+        raise ValueError(f"filter.type: {kind!r} cannot run on a track model ({e})") from None
 
