@@ -150,7 +150,7 @@ class _ScenarioView:
 # --------------------------------------------------------------------------
 # parameters of each section
 # --------------------------------------------------------------------------
-def _at_least_one(field: str, v: int) -> int:
+def _one_to_three(field: str, v: int) -> int:
     if not 1 <= v <= 3:
         raise ValueError(f"{field}: must be 1, 2 or 3, got {v}")
     return v
@@ -192,7 +192,7 @@ def _sensor_id(field: str, v: str) -> str:
 
 MOTION_PARAMS = (
     Param("type", "str", REQUIRED, "motion model", choices=("cv", "ca")),
-    Param("ndim", "int", 2, "spatial axes (1, 2 or 3)", check=_at_least_one),
+    Param("ndim", "int", 2, "spatial axes (1, 2 or 3)", check=_one_to_three),
     Param("q", "float", REQUIRED, "acceleration (cv) or jerk (ca) noise intensity", check=_positive),
     Param("noise", "str", "discrete", "white-noise model", choices=("discrete", "continuous")),
     Param("dt", "float", 1.0, "nominal interval, s: the first step's dt when [prior] has no time", check=_positive),
