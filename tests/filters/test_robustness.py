@@ -6,8 +6,8 @@ times, not 10^6 times) on a deliberately hard scenario: irregular steps from
 0.01 s to 10 s with rare 500 s gaps, precise sensors, 20 % of the components
 missing at random.  Before the sigma-point filters used the Joseph form
 (``filters/gaussian.py``) the UKF and the CKF lost positive definiteness
-hundreds of times here, and the closed-form 3x3 inverse sent the TOA runs to
-NaN; see the report of issue 7 for the numbers.
+here (the ukf-range and ckf-toa cases failed), and before the 3x3 inverse
+had its fallback for nearly singular S the TOA runs went to NaN.
 """
 
 from __future__ import annotations

@@ -87,3 +87,16 @@ def test_documented_command(command, expected):
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ""  # no warnings, no broken-pipe noise
     _same_text(proc.stdout.splitlines(), expected, command)
+
+
+def test_the_python_example_runs_from_the_repository_root(monkeypatch):
+    # Fenced as ```py (tests/test_docs.py runs ```python blocks in a temporary folder, where the
+    # example paths do not exist); run here from the root, where they do.
+    blocks = re.findall(r"^```py\n(.*?)^```", DOC.read_text(), re.S | re.M)
+    assert blocks
+    monkeypatch.chdir(ROOT)
+    namespace: dict = {}
+    for block in blocks:
+        exec(compile(block, "track.md", "exec"), namespace)
+    result = namespace["result"]
+    assert result.problems == [] and len(result.estimates) == 59

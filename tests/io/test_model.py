@@ -126,7 +126,7 @@ type = "kf"
     [
         ('type = "cv"', 'type = "cj"', 2, "motion.type: must be one of 'cv', 'ca'"),
         ("q = 0.01", "q = -1.0", 4, "motion.q: must be positive"),
-        ("q = 0.01", "", None, "motion.q: required"),
+        ("q = 0.01", "", 1, "motion.q: required"),  # a missing key: the line of its table
         ("ndim = 2", "ndim = 5", 3, "motion.ndim: must be 1, 2 or 3"),
         ("ndim = 2", 'ndim = "2"', 3, "motion.ndim: expected an integer"),
         ('id = "B"', 'id = "A"', 13, "sensors[1].id: 'A' is already used by sensors[0]"),

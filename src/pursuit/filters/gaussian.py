@@ -42,7 +42,8 @@ filter:
 ``gated`` (*b,)
     True where the χ² gate rejected the measurement: the estimate is the
     prediction, while ``innovation``, ``S``, ``nis``, ``dof`` and ``loglik``
-    describe the rejected measurement.  Always False without a gate.
+    describe the rejected measurement.  Always False without a gate.  A
+    fading strategy with an outlier gate of its own (IFMKF) also sets it.
 ``pred_mean``, ``pred_cov``, ``cross_cov``
     Predicted mean and covariance and cov(x_{k−1}, x⁻_k), kept by
     :func:`pursuit.run` only when asked, for the RTS smoother.
@@ -272,6 +273,8 @@ class _GaussianFilter:
         info["cross_cov"] = pred.cross
         for key, value in fade.info.items():
             info[key] = value
+        if "gated" in fade.info:  # a fading strategy's own outlier gate (IFMKF) rejects too
+            info["gated"] = np.asarray(fade.info["gated"], dtype=bool) | gated
         return GaussianState(mean=mean, cov=cov, k=k, memory=memory), info
 
     # -- hooks --------------------------------------------------------------
