@@ -132,3 +132,28 @@ def test_gated_sigma_point_and_extended_filters_are_batch_invariant_bit_for_bit(
         one = pu.run(filt, sim.measurements[:, i : i + 1], pu.Gaussian(sim.prior.mean[i : i + 1], sim.prior.cov))
         assert np.array_equal(one.mean[:, 0], batch.mean[:, i])
         assert np.array_equal(one.cov[:, 0], batch.cov[:, i])
+
+
+class _SkipFirstRun:
+    """A fading strategy with an outlier gate of its own that always rejects run 0."""
+
+    data_independent = False
+
+    def init(self, batch):
+        return None
+
+    def factor(self, memory, ctx):
+        from pursuit.filters.fading import Fade
+
+        mask = np.zeros(ctx.pred_mean.shape[:-1], dtype=bool)
+        mask[0] = True
+        return Fade(1.0, skip=mask, info={"gated": mask}), memory
+
+
+def test_a_fading_strategys_gate_and_the_chi2_gate_share_the_flag():
+    sc = LinearCV(ndim=1, steps=3, sigma=1.0)
+    filt = pu.KalmanFilter(sc.motion, sc.measurement, fading=_SkipFirstRun(), gate=0.99)
+    state = filt.init(pu.Gaussian([0.0, 1.0], np.eye(2)), batch=(3,))
+    z = np.array([[0.5], [0.5], [80.0]])  # run 2 is a chi-square outlier
+    _, info = filt.step(state, z)
+    assert info["gated"].tolist() == [True, False, True]
