@@ -220,3 +220,21 @@ def test_ctrl_c_ends_a_live_stream_cleanly():
     assert proc.returncode == 130
     assert "Traceback" not in err and "interrupted" in err
     assert [json.loads(line)["time"] for line in lines] == [1.0]
+
+
+def test_a_particle_filter_whose_weights_all_underflow_recovers_and_says_so(tmp_path, capsys):
+    # Sensor A1 claims a noise of 1e-160 m: every particle's likelihood underflows to zero
+    # whenever A1 reports.  The particle filter's recovery rule (issue 3) keeps the predictive
+    # weights; pursuit track writes finite estimates and flags those steps weights_reset.
+    text = Path(WSN_MODEL).read_text().replace("sigma = 1.0          # m", "sigma = 1e-160")
+    text = text.replace('type = "ekf"', 'type = "pf"\nparticles = 300') + "\n[track]\nseed = 3\n"
+    model = tmp_path / "pf.toml"
+    model.write_text(text)
+    assert main(["track", WSN_CSV, "-c", str(model)]) == 0
+    rows = [line.split(",") for line in capsys.readouterr().out.splitlines()[1:]]
+    with open(WSN_CSV) as f:
+        a1_times = {float(line.split(",")[0]) for line in f if ",A1," in line}
+    assert len(rows) == len(_api_estimates())
+    for row in rows:
+        assert all(np.isfinite(float(v)) for v in row[:9])
+        assert ("weights_reset" in row[11].split(";")) == (float(row[0]) in a1_times)
