@@ -20,7 +20,7 @@ from __future__ import annotations
 from typing import Sequence
 
 import numpy as np
-from scipy import stats
+from ._chi2 import chi2_ppf
 
 __all__ = [
     "squared_error",
@@ -113,6 +113,6 @@ def chi2_bounds(dof_per_value: float | np.ndarray, count: int | np.ndarray, leve
     """Two-sided χ² bounds for the average of ``count`` independent χ²(dof) values."""
     alpha = 1.0 - level
     total = np.asarray(dof_per_value, dtype=float) * np.asarray(count, dtype=float)
-    lo = stats.chi2.ppf(alpha / 2.0, total) / count
-    hi = stats.chi2.ppf(1.0 - alpha / 2.0, total) / count
+    lo = chi2_ppf(alpha / 2.0, total) / count
+    hi = chi2_ppf(1.0 - alpha / 2.0, total) / count
     return lo, hi

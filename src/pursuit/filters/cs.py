@@ -33,7 +33,8 @@ from functools import lru_cache
 from typing import Any
 
 import numpy as np
-from scipy import stats
+
+from .._chi2 import chi2_isf
 
 from .._validation import in_range, nonnegative, positive
 from ..gaussian import Gaussian
@@ -62,7 +63,7 @@ _H_AXIS.setflags(write=False)
 def chi2_threshold(p: float, dof: int = 1) -> float:
     """The χ² threshold M with P{D > M} = p for D ~ χ²(dof) (p = 0.1, 1 dof: 2.706)."""
     in_range("false_alarm", p, 0.0, 1.0, low_open=True, high_open=True)
-    return float(stats.chi2.isf(p, dof))
+    return float(chi2_isf(p, dof))
 
 
 @dataclass(frozen=True)

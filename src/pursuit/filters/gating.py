@@ -33,10 +33,10 @@ def chi2_gate_thresholds(gate: float, max_dof: int) -> np.ndarray:
     """
     if not 0.0 < gate < 1.0:
         raise ValueError(f"gate: must lie in (0, 1), got {gate!r}")
-    from scipy import stats  # only when a gate is used: keeps importing the filters light
+    from .._chi2 import chi2_ppf
 
     out = np.full(max_dof + 1, np.inf)
     if max_dof > 0:
-        out[1:] = stats.chi2.ppf(gate, np.arange(1, max_dof + 1))
+        out[1:] = chi2_ppf(gate, np.arange(1, max_dof + 1))
     out.setflags(write=False)
     return out
