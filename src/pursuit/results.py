@@ -11,7 +11,15 @@ from typing import Any, Sequence
 import numpy as np
 
 from . import metrics
-from .reduction import FilterStatistics, component_groups, filter_statistics, group_key, merge_statistics, run_sum
+from ._json import json_default
+from .reduction import (
+    FilterStatistics,
+    component_groups,
+    filter_statistics,
+    group_key,
+    merge_statistics,
+    run_sum,
+)
 
 __all__ = ["FilterResult", "MonteCarloResult", "STORE_MODES"]
 
@@ -351,7 +359,7 @@ class MonteCarloResult:
         if extra:
             doc.update(extra)
         path = Path(path)
-        path.write_text(json.dumps(doc, indent=2, default=_json_default) + "\n")
+        path.write_text(json.dumps(doc, indent=2, default=json_default) + "\n")
         return path
 
 
@@ -359,13 +367,3 @@ def _fmt(v: Any) -> Any:
     if isinstance(v, float):
         return repr(v)
     return v
-
-
-def _json_default(o: Any) -> Any:
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")

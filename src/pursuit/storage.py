@@ -31,6 +31,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from ._json import json_default
 from .experiment import ExperimentOutput, Table
 from .reduction import FilterStatistics
 from .results import FilterResult, MonteCarloResult
@@ -45,16 +46,6 @@ __all__ = [
 ]
 
 FORMAT = "pursuit-result/1"
-
-
-def _json_default(o: Any) -> Any:
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, Path):
-        return str(o)
-    return str(o)
 
 
 # --------------------------------------------------------------------------
@@ -107,7 +98,7 @@ def save_result(result: MonteCarloResult, path: str | Path) -> Path:
     meta = _result_arrays(result, "", arrays)
     meta["format"] = FORMAT
     meta["config"] = result.config
-    arrays["meta"] = np.array(json.dumps(meta, default=_json_default))
+    arrays["meta"] = np.array(json.dumps(meta, default=json_default))
     with path.open("wb") as fh:
         np.savez(fh, **arrays)
     return path

@@ -9,7 +9,6 @@ import pytest
 
 import pursuit as pu
 from pursuit.io import Dropped, load_track_model, read_records, stream_records, track_records
-from pursuit.io.records import Record
 from pursuit.rng import run_streams
 from pursuit.scenarios import WSNRange
 

@@ -32,13 +32,12 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from .. import registry
 from ..engine.montecarlo import monte_carlo
 from ..experiment import ExperimentOutput, Table
 from ..registry import Param, register
 from ..report.figures import fading_over_time, rmse_over_time
 from ..results import MonteCarloResult
-from .experiments import build_filters, build_scenario, resolve_section
+from .experiments import build_filters, build_scenario, resolve_paper, resolve_section
 
 __all__ = ["ConditionsPlan", "cumulative_rmse", "improvement"]
 
@@ -300,23 +299,16 @@ def _conditions(sections: dict[str, Any]) -> list[Condition]:
 
 
 def _paper(sections: dict[str, Any], conditions: list[str], filters: list[str]) -> list[dict[str, Any]]:
-    entries = sections.get("paper", [])
-    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
-        raise ValueError("paper: expected [[paper]] tables")
-    out = []
-    for i, entry in enumerate(entries):
+    out = resolve_paper(sections, filters, PAPER_PARAMS)
+    for i, vals in enumerate(out):
         where = f"paper[{i}]"
-        vals = registry.Component("section", "paper", "", PAPER_PARAMS, dict).resolve(entry, where)
         if vals["condition"] not in conditions:
             raise ValueError(f"{where}.condition: no condition named {vals['condition']!r} (have {', '.join(conditions)})")
-        if vals["filter"] not in filters:
-            raise ValueError(f"{where}.filter: no filter named {vals['filter']!r} (have {', '.join(filters)})")
         if vals["metric"] == "improvement_pct":
             if vals["baseline"] not in filters:
                 raise ValueError(f"{where}.baseline: metric improvement_pct needs a baseline filter (have {', '.join(filters)})")
         elif vals["metric"] != "cumulative_rmse" and vals["baseline"]:
             raise ValueError(f"{where}.baseline: only used with metric = 'improvement_pct'")
-        out.append(vals)
     return out
 
 

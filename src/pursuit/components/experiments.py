@@ -6,8 +6,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from .. import registry
 from ..engine.montecarlo import monte_carlo, validate_filters
 from ..experiment import ExperimentOutput, Table
@@ -86,17 +84,24 @@ def resolve_section(sections: dict[str, Any], name: str, params: tuple[Param, ..
     return registry.Component("section", name, "", params, dict).resolve(table, name)
 
 
-def resolve_paper(sections: dict[str, Any], filter_names: list[str]) -> list[dict[str, Any]]:
-    """Check the ``[[paper]]`` reference values."""
+def resolve_paper(
+    sections: dict[str, Any], filter_names: list[str] | set[str], params: tuple[Param, ...] = PAPER_PARAMS
+) -> list[dict[str, Any]]:
+    """Check the ``[[paper]]`` reference values against ``params``; each must name a known filter.
+
+    Kinds with extra keys (a condition, a swept value) pass their own
+    ``params`` and check those keys on the returned entries.
+    """
     entries = sections.get("paper", [])
     if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
         raise ValueError("paper: expected [[paper]] tables")
     out = []
     for i, entry in enumerate(entries):
         where = f"paper[{i}]"
-        vals = registry.Component("section", "paper", "", PAPER_PARAMS, dict).resolve(entry, where)
+        vals = registry.Component("section", "paper", "", params, dict).resolve(entry, where)
         if vals["filter"] not in filter_names:
-            raise ValueError(f"{where}.filter: no filter named {vals['filter']!r} (have {', '.join(filter_names)})")
+            have = ", ".join(sorted(filter_names) if isinstance(filter_names, set) else filter_names)
+            raise ValueError(f"{where}.filter: no filter named {vals['filter']!r} (have {have})")
         out.append(vals)
     return out
 

@@ -10,7 +10,12 @@ from typing import Any
 
 from .. import registry
 from ..filters.fading import Constant
-from ..filters.gaussian import CubatureKalmanFilter, ExtendedKalmanFilter, KalmanFilter, UnscentedKalmanFilter
+from ..filters.gaussian import (
+    CubatureKalmanFilter,
+    ExtendedKalmanFilter,
+    KalmanFilter,
+    UnscentedKalmanFilter,
+)
 from ..registry import Param, register
 
 

@@ -11,7 +11,11 @@ from typing import Any
 import numpy as np
 
 from .. import registry
-from ..filters.cs import AdaptiveCSFilter, CurrentStatisticalFilter, ModifiedSingerFilter
+from ..filters.cs import (
+    AdaptiveCSFilter,
+    CurrentStatisticalFilter,
+    ModifiedSingerFilter,
+)
 from ..filters.gaussian import KalmanFilter
 from ..filters.imm import InteractingMultipleModel
 from ..models import maneuver as mm

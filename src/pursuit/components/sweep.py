@@ -40,10 +40,14 @@ from ..engine.snapshots import particle_snapshots
 from ..experiment import ExperimentOutput, Table
 from ..registry import Param, register
 from ..report.figures import rmse_over_time, trajectory
-from ..report.sweep_figures import abs_error_over_time, metric_against_value, particle_clouds
+from ..report.sweep_figures import (
+    abs_error_over_time,
+    metric_against_value,
+    particle_clouds,
+)
 from ..results import MonteCarloResult
 from ..rng import run_streams
-from .experiments import build_filters, build_scenario, resolve_section
+from .experiments import build_filters, build_scenario, resolve_paper, resolve_section
 
 __all__ = ["SweepPlan", "run_metric", "paired_difference"]
 
@@ -429,17 +433,10 @@ def _sweep(sections: dict[str, Any], path: Path, name: str) -> SweepPlan:
     names = set()
     for variant in variants or [None]:
         names.update(f.name for f in plan._filters(plan._scenario(variant), sweep["values"][0], True))
-    paper = []
-    raw = sections.get("paper", [])
-    if not isinstance(raw, list) or not all(isinstance(e, dict) for e in raw):
-        raise ValueError("paper: expected [[paper]] tables")
-    for i, entry in enumerate(raw):
-        vals = registry.Component("section", "paper", "", PAPER_PARAMS, dict).resolve(entry, f"paper[{i}]")
-        if vals["filter"] not in names:
-            raise ValueError(f"paper[{i}].filter: no filter named {vals['filter']!r} (have {', '.join(sorted(names))})")
+    paper = resolve_paper(sections, names, PAPER_PARAMS)
+    for i, vals in enumerate(paper):
         if variants and vals["variant"] not in labels:
             raise ValueError(f"paper[{i}].variant: no variant labelled {vals['variant']!r}")
-        paper.append(vals)
     plan.paper = paper
     for i, (a, b) in enumerate(sweep["pairs"]):
         for n in (a, b):

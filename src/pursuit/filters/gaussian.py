@@ -63,7 +63,7 @@ from .._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, mv, numerica
 from .._validation import in_range, nonnegative
 from ..gaussian import Gaussian
 from ..rng import RNGLike
-from .fading import Constant, Fade, FadingContext, FadingStrategy, NoFading
+from .fading import Constant, FadingContext, FadingStrategy, NoFading
 from .gating import chi2_gate_thresholds
 
 __all__ = [

@@ -5,17 +5,18 @@ from __future__ import annotations
 import csv
 import json
 import os
-from importlib import metadata
 import platform
 import shutil
 import sys
 import tempfile
 from datetime import datetime, timezone
+from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .._json import json_default
 from ..experiment import ExperimentOutput, Table
 
 __all__ = ["write_output", "format_table", "versions", "cell", "FILES"]
@@ -96,18 +97,6 @@ def _write_csv(path: Path, table: Table) -> None:
             w.writerow(["" if v is None else (repr(float(v)) if isinstance(v, (float, np.floating)) else v) for v in row])
 
 
-def _json_default(o: Any) -> Any:
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, Path):
-        return str(o)
-    if isinstance(o, datetime):
-        return o.isoformat()
-    return repr(o)
-
-
 def write_output(
     output: ExperimentOutput,
     out_dir: str | Path,
@@ -139,7 +128,12 @@ def write_output(
     command
         The command line that produced it, for the sidecar.
     """
-    from ..storage import monte_carlo_results, save_results, write_errors_csv, write_per_step_csv
+    from ..storage import (
+        monte_carlo_results,
+        save_results,
+        write_errors_csv,
+        write_per_step_csv,
+    )
     from .html import write_report
 
     formats = tuple(dict.fromkeys(("png", *formats)))
@@ -187,7 +181,7 @@ def write_output(
         sidecar["results"] = manifest
         files["report.html"] = FILES["report.html"]
         sidecar["files"] = {"run.json": FILES["run.json"], **files}
-        (tmp / "run.json").write_text(json.dumps(sidecar, indent=2, default=_json_default) + "\n")
+        (tmp / "run.json").write_text(json.dumps(sidecar, indent=2, default=json_default) + "\n")
         write_report(tmp)
         old = None
         if out_dir.exists():
