@@ -40,3 +40,14 @@ def scratch(work: Workspace | None, name: str, shape: tuple[int, ...], dtype=flo
     if work is None:
         return np.empty(shape, dtype=dtype)
     return work.get(name, shape, dtype)
+
+
+def memo(work: Workspace | None, name: str, key: object, make):
+    """A cached object for ``key`` (compared by identity), rebuilt by ``make()`` when the key changes."""
+    if work is None:
+        return make()
+    held = work._bufs.get(name)
+    if held is None or held[0] is not key:
+        held = (key, make())
+        work._bufs[name] = held
+    return held[1]

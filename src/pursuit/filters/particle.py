@@ -67,6 +67,7 @@ import numpy as np
 
 from .._linalg import inv_spd, quad, symmetrize
 from .._validation import in_range, positive_int
+from ..compute import fallback_warning, resolve_backend
 from ..gaussian import Gaussian
 from ..models.measurement import _GaussianNoise, gaussian_loglik
 from ..rng import RNGLike, RunStreams, as_rng
@@ -325,6 +326,10 @@ class ParticleFilterBase:
         number r in [0, 1]: resample when ESS < r·N (0 = never).
     name
         Label used in results.
+    backend
+        Compute backend: ``"numpy"``, ``"numba"`` (compiled, for the
+        built-in models; see :mod:`pursuit.compute`) or ``None`` for the
+        process default.  Not the Monte Carlo engine's execution backend.
     """
 
     motion: Any
@@ -333,8 +338,10 @@ class ParticleFilterBase:
     resampler: str = "systematic"
     ess_threshold: float | None = None
     name: str = ""
+    backend: str | None = None
     _stock: bool = field(init=False, repr=False, compare=False, default=False)
     _plain_residual: bool = field(init=False, repr=False, compare=False, default=True)
+    _specs: Any = field(init=False, repr=False, compare=False, default=None)
 
     def __post_init__(self) -> None:
         for attr in ("sample", "f", "cov"):
@@ -355,9 +362,42 @@ class ParticleFilterBase:
         )
         if not self.name:
             object.__setattr__(self, "name", self._default_name())
+        self._select_backend()
 
     def _default_name(self) -> str:
         return type(self).__name__
+
+    # -- compute backend -----------------------------------------------------
+    def _select_backend(self) -> None:
+        """Resolve ``backend`` and, for ``"numba"``, find the compiled form of the models (or warn and use NumPy)."""
+        object.__setattr__(self, "backend", resolve_backend(self.backend))
+        object.__setattr__(self, "_specs", None)
+        if self.backend != "numba":
+            return
+        reason = self._compiled_unsupported()
+        if reason is None:
+            from .._compiled.specs import model_specs
+
+            specs = model_specs(self.motion, self.measurement, need_diagonal=True)
+            if isinstance(specs, str):
+                reason = specs
+            else:
+                object.__setattr__(self, "_specs", specs)
+        if reason is not None:
+            fallback_warning(self, reason)
+
+    def _compiled_unsupported(self) -> str | None:
+        """Why this filter (not its models) has no compiled path; None when it has one."""
+        return f"{type(self).__name__}"
+
+    @property
+    def compiled(self) -> bool:
+        """Whether steps run compiled (``backend="numba"`` with supported models)."""
+        return self._specs is not None
+
+    def _compiled_batch(self, state: ParticleState) -> bool:
+        """Compiled steps handle one batch axis with RunStreams (any batch shape with one Generator)."""
+        return self._specs is not None and (state.particles.ndim <= 3 or not isinstance(state.rng, RunStreams))
 
     # -- init ----------------------------------------------------------------
     def init(self, prior: Any, batch: tuple[int, ...] = (), rng: RNGLike = None) -> ParticleState:
@@ -631,6 +671,9 @@ class BootstrapParticleFilter(ParticleFilterBase):
     def _default_name(self) -> str:
         return "PF"
 
+    def _compiled_unsupported(self) -> str | None:
+        return None
+
     def step(
         self, state: ParticleState, z: np.ndarray, k: int | None = None, dt: float | None = None
     ) -> tuple[ParticleState, dict[str, np.ndarray]]:
@@ -649,6 +692,10 @@ class BootstrapParticleFilter(ParticleFilterBase):
         """
         k = state.k + 1 if k is None else int(k)
         z = _prepare_measurement(z, state.batch, k)
+        if self._compiled_batch(state):
+            from .._compiled.particle import bootstrap_step
+
+            return bootstrap_step(self, self._specs, state, z, k, dt)
         rng = state.rng
         X = _propagate(self.motion, state.particles, k, dt, rng)
         work = state.work

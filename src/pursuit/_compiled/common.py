@@ -1,0 +1,277 @@
+"""Small compiled helpers shared by the particle and Gaussian kernels: models, resampling, linear algebra.
+
+Everything here is ``@njit(cache=True)``; the model functions evaluate the
+built-in models of :mod:`pursuit._compiled.specs` for one state vector.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# kinds, as in specs.py (module constants are frozen into the compiled code)
+LINEAR = 0
+UNGM = 1
+M_LINEAR = 0
+M_UNGM = 1
+M_RANGE = 2
+M_RANGE_BEARING = 3
+
+R_SYSTEMATIC = 0
+R_STRATIFIED = 1
+R_MULTINOMIAL = 2
+R_RESIDUAL = 3
+
+LOG_2PI = math.log(2.0 * math.pi)
+TWO_PI = 2.0 * math.pi
+# exp() of a log-weight below this is a denormal or zero (and slow): use 0
+EXP_FLOOR = -708.0
+
+
+@njit(cache=True, inline="always")
+def wrap(a):
+    """Angle wrapped to [-π, π), as :func:`pursuit.models.measurement.wrap_angle`."""
+    return (a + math.pi) % TWO_PI - math.pi
+
+
+@njit(cache=True)
+def h_one(hk, A, idx, scale, x, out):
+    """Noise-free measurement of one state ``x`` (n,) into ``out`` (m,)."""
+    if hk == M_UNGM:
+        out[0] = x[0] * x[0] * (1.0 / scale)
+    elif hk == M_LINEAR:
+        m, n = A.shape
+        for a in range(m):
+            acc = 0.0
+            for j in range(n):
+                acc += A[a, j] * x[j]
+            out[a] = acc
+    elif hk == M_RANGE:
+        s, d = A.shape
+        for a in range(s):
+            acc = 0.0
+            for j in range(d):
+                t = x[idx[j]] - A[a, j]
+                acc += t * t
+            out[a] = math.sqrt(acc) / scale
+    else:
+        dx = x[idx[0]] - A[0, 0]
+        dy = x[idx[1]] - A[0, 1]
+        out[0] = math.hypot(dx, dy)
+        out[1] = math.atan2(dy, dx)
+
+
+@njit(cache=True)
+def jac_one(hk, A, idx, scale, x, out):
+    """Measurement Jacobian at one state ``x`` into ``out`` (m, n) (zeros where a model has them)."""
+    m, n = out.shape
+    for a in range(m):
+        for j in range(n):
+            out[a, j] = 0.0
+    if hk == M_UNGM:
+        out[0, 0] = (2.0 / scale) * x[0]
+    elif hk == M_LINEAR:
+        for a in range(m):
+            for j in range(n):
+                out[a, j] = A[a, j]
+    elif hk == M_RANGE:
+        s, d = A.shape
+        for a in range(s):
+            acc = 0.0
+            for j in range(d):
+                t = x[idx[j]] - A[a, j]
+                acc += t * t
+            r = math.sqrt(acc)
+            if r > 0:
+                for j in range(d):
+                    out[a, idx[j]] = (x[idx[j]] - A[a, j]) / r / scale
+    else:
+        dx = x[idx[0]] - A[0, 0]
+        dy = x[idx[1]] - A[0, 1]
+        r2 = dx * dx + dy * dy
+        r = math.sqrt(r2)
+        if r > 0:
+            out[0, idx[0]] = dx / r
+            out[0, idx[1]] = dy / r
+        if r2 > 0:
+            out[1, idx[0]] = -dy / r2
+            out[1, idx[1]] = dx / r2
+
+
+@njit(cache=True)
+def cholesky_inplace(S, L):
+    """Lower Cholesky factor of ``S`` (m, m) into ``L``; False if S is not finite and positive definite."""
+    m = S.shape[0]
+    for i in range(m):
+        for j in range(m):
+            L[i, j] = 0.0
+    for j in range(m):
+        acc = S[j, j]
+        for p in range(j):
+            acc -= L[j, p] * L[j, p]
+        if not (acc > 0.0) or not math.isfinite(acc):
+            return False
+        d = math.sqrt(acc)
+        L[j, j] = d
+        for i in range(j + 1, m):
+            acc = S[i, j]
+            for p in range(j):
+                acc -= L[i, p] * L[j, p]
+            L[i, j] = acc / d
+    return True
+
+
+@njit(cache=True)
+def chol_quad(L, v, tmp):
+    """vᵀ (L Lᵀ)⁻¹ v by forward substitution."""
+    m = L.shape[0]
+    tot = 0.0
+    for i in range(m):
+        acc = v[i]
+        for p in range(i):
+            acc -= L[i, p] * tmp[p]
+        tmp[i] = acc / L[i, i]
+        tot += tmp[i] * tmp[i]
+    return tot
+
+
+@njit(cache=True)
+def spd_inverse(L, out):
+    """(L Lᵀ)⁻¹ into ``out`` from a lower Cholesky factor."""
+    m = L.shape[0]
+    # invert L (lower triangular) into out, then out = L⁻ᵀ L⁻¹
+    Li = np.zeros((m, m))
+    for j in range(m):
+        Li[j, j] = 1.0 / L[j, j]
+        for i in range(j + 1, m):
+            acc = 0.0
+            for p in range(j, i):
+                acc -= L[i, p] * Li[p, j]
+            Li[i, j] = acc / L[i, i]
+    for i in range(m):
+        for j in range(m):
+            acc = 0.0
+            for p in range(max(i, j), m):
+                acc += Li[p, i] * Li[p, j]
+            out[i, j] = acc
+
+
+# --------------------------------------------------------------------------
+# resampling: copy counts of one run from its weights (unnormalised) and uniforms
+# --------------------------------------------------------------------------
+@njit(cache=True)
+def _cdf(e, c):
+    N = e.shape[0]
+    acc = 0.0
+    for i in range(N):
+        acc += e[i]
+        c[i] = acc
+    last = c[N - 1]
+    for i in range(N):
+        c[i] /= last
+    c[N - 1] = 1.0
+
+
+@njit(cache=True)
+def n_uniforms(kind, N):
+    """Uniforms a run draws to resample (as the NumPy resamplers)."""
+    if kind == R_SYSTEMATIC:
+        return 1
+    if kind == R_STRATIFIED:
+        return N
+    return N + 1
+
+
+@njit(cache=True)
+def _sorted_uniforms(U, count, out):
+    """``count`` sorted uniforms from N + 1 exponential spacings (as resample._sorted_uniforms), padded with 2."""
+    N = out.shape[0]
+    acc = 0.0
+    total = 1.0
+    for i in range(N + 1):
+        acc += -math.log1p(-U[i])
+        if i < N:
+            out[i] = acc
+        if i == count:
+            total = acc
+    for i in range(N):
+        out[i] = out[i] / total if i < count else 2.0
+
+
+@njit(cache=True)
+def _locate_counts(c, u, counts):
+    """counts[bin] += 1 for each u <= 1, bin = #{j: c_j <= u} capped at N − 1 (u sorted)."""
+    N = c.shape[0]
+    j = 0
+    for t in range(u.shape[0]):
+        x = u[t]
+        if x > 1.0:
+            break
+        while j < N and c[j] <= x:
+            j += 1
+        counts[min(j, N - 1)] += 1
+
+
+@njit(cache=True)
+def resample_counts(kind, e, U, c, tmp, counts):
+    """Copy counts (N,) of one run: weights ``e`` (unnormalised), uniforms ``U``, scratch ``c``, ``tmp``."""
+    N = e.shape[0]
+    if kind == R_SYSTEMATIC:
+        _cdf(e, c)
+        u0 = U[0]
+        prev = 0.0
+        for i in range(N):
+            below = math.ceil(c[i] * N - u0)
+            counts[i] = np.int64(below - prev)
+            prev = below
+    elif kind == R_STRATIFIED:
+        _cdf(e, c)
+        prev = 0
+        for i in range(N):
+            x = N * c[i]
+            J = min(int(math.floor(x)), N - 1)
+            below = J + (1 if U[J] < x - J else 0)
+            counts[i] = below - prev
+            prev = below
+    elif kind == R_MULTINOMIAL:
+        _cdf(e, c)
+        _sorted_uniforms(U, N, tmp)
+        for i in range(N):
+            counts[i] = 0
+        _locate_counts(c, tmp, counts)
+    else:
+        s = 0.0
+        for i in range(N):
+            s += e[i]
+        rest = N
+        for i in range(N):
+            Nw = N * (e[i] / s)
+            d = math.floor(Nw + 1e-9)
+            counts[i] = np.int64(d)
+            rest -= np.int64(d)
+            c[i] = max(Nw - d, 0.0)
+        if rest < 0:
+            rest = 0
+        tot = 0.0
+        for i in range(N):
+            tot += c[i]
+        if not (tot > 0):
+            for i in range(N):
+                c[i] = 1.0
+        _cdf(c.copy(), c)
+        _sorted_uniforms(U, rest, tmp)
+        _locate_counts(c, tmp, counts)
+
+
+@njit(cache=True)
+def copy_by_counts(src, counts, dst):
+    """dst = src with particle i repeated counts[i] times (rows in order)."""
+    N, n = src.shape
+    pos = 0
+    for i in range(N):
+        for _ in range(counts[i]):
+            for j in range(n):
+                dst[pos, j] = src[i, j]
+            pos += 1

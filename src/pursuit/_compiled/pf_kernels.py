@@ -1,0 +1,685 @@
+"""Compiled bootstrap particle filter: one step for a batch of runs, parallel over runs.
+
+Each run is processed by one thread from start to end (propagate, weigh,
+moments, resample) with its particles in cache, drawing from its own NumPy
+``Generator`` in the same order as the NumPy filter (process noise, then the
+resampler's uniforms), so run i's numbers do not depend on the batch.  With
+one shared Generator for the whole batch the caller draws the noise with
+NumPy in the NumPy filter's order and passes it in (``per_run=False``), and
+resampling is a second kernel after the caller has drawn the uniforms of the
+runs that resample.
+
+The arithmetic follows :class:`pursuit.filters.particle.ParticleFilterBase`
+step by step (see its module docstring for the meaning of every output);
+only the summation order and the floor of ``exp`` at −708 (denormal weights
+are set to 0) differ, so estimates agree with NumPy's to rounding.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from .common import (
+    EXP_FLOOR,
+    LOG_2PI,
+    M_LINEAR,
+    M_UNGM,
+    R_SYSTEMATIC,
+    UNGM,
+    chol_quad,
+    cholesky_inplace,
+    copy_by_counts,
+    h_one,
+    n_uniforms,
+    resample_counts,
+    wrap,
+)
+
+
+@njit(cache=True)
+def propagate_run(mk, F, G, par, Xin, noise, Xout):
+    """x_k = f(x_{k−1}) + noise for the N particles of one run (noise: N·q standard normals)."""
+    N, n = Xin.shape
+    if mk == UNGM:
+        a, b, forcing, sq = par[0], par[1], par[2], par[3]
+        for i in range(N):
+            x = Xin[i, 0]
+            Xout[i, 0] = noise[i] * sq + (x * (a + b / (x * x + 1.0)) + forcing)
+    else:
+        q = G.shape[1]
+        for i in range(N):
+            for a_ in range(n):
+                acc = 0.0
+                for j in range(n):
+                    acc += F[a_, j] * Xin[i, j]
+                acc2 = 0.0
+                for j in range(q):
+                    acc2 += G[a_, j] * noise[i * q + j]
+                Xout[i, a_] = acc + acc2
+
+
+@njit(cache=True)
+def measure_run(hk, A, idx, scale, R, angle, X, z, valid, Zp, ll):
+    """Predicted measurements Zp (N, m) and ll (N,) = −½ Σ_valid ν²/R_jj; returns the constant and measured flag."""
+    N = X.shape[0]
+    m = z.shape[0]
+    const = 0.0
+    measured = False
+    for j in range(m):
+        if valid[j]:
+            measured = True
+            const += -0.5 * (math.log(R[j, j]) + LOG_2PI)
+    for i in range(N):
+        h_one(hk, A, idx, scale, X[i], Zp[i])
+        acc = 0.0
+        for j in range(m):
+            if valid[j]:
+                r = z[j] - Zp[i, j]
+                if angle and j == 1:
+                    r = wrap(r)
+                acc += r * r * (-0.5 / R[j, j])
+        ll[i] = acc
+    if not measured:
+        for i in range(N):
+            ll[i] = 0.0
+    return const, measured
+
+
+@njit(cache=True)
+def predictive_run(Zp, offset, uniform, z, valid, R, angle, innov, S, L, tmp):
+    """Innovation, S and NIS of one run from predicted measurements and predictive weights exp(offset)/N."""
+    N, m = Zp.shape
+    zhat = np.zeros(m)
+    invN = 1.0 / N
+    # weighted mean (about the first particle's value for an angle)
+    for i in range(N):
+        w = invN if uniform else math.exp(offset[i]) * invN
+        for j in range(m):
+            d = Zp[i, j]
+            if angle and j == 1:
+                d = wrap(d - Zp[0, j])
+            zhat[j] += w * d
+    if angle:
+        zhat[1] += Zp[0, 1]
+    P = np.zeros((m, m))
+    D = np.empty(m)
+    for i in range(N):
+        w = invN if uniform else math.exp(offset[i]) * invN
+        for j in range(m):
+            d = Zp[i, j] - zhat[j]
+            if angle and j == 1:
+                d = wrap(d)
+            D[j] = d
+        for a in range(m):
+            for b in range(a, m):
+                P[a, b] += w * D[a] * D[b]
+    dof = 0
+    for a in range(m):
+        nu = z[a] - zhat[a]
+        if angle and a == 1:
+            nu = wrap(nu)
+        if valid[a]:
+            dof += 1
+            innov[a] = nu
+            tmp[a] = nu
+        else:
+            innov[a] = np.nan
+            tmp[a] = 0.0
+        for b in range(m):
+            if valid[a] and valid[b]:
+                S[a, b] = (P[a, b] if a <= b else P[b, a]) + R[a, b]
+            else:
+                S[a, b] = 1.0 if a == b else 0.0
+    nis = np.nan
+    if dof > 0 and cholesky_inplace(S, L):
+        nis = chol_quad(L, tmp.copy(), tmp)
+    return nis, dof
+
+
+@njit(cache=True)
+def exp_shifted_run(a, fallback, has_fallback, e):
+    """e = exp(a − max a) with NaN as −inf and the zero-likelihood recovery; returns (mx, s, s2, reset)."""
+    N = a.shape[0]
+    mx = -np.inf
+    for i in range(N):
+        v = a[i]
+        if math.isnan(v):
+            v = -np.inf
+            a[i] = v
+        if v > mx:
+            mx = v
+    reset = False
+    if math.isinf(mx) and mx > 0:  # infinite densities share the weight
+        for i in range(N):
+            a[i] = 0.0 if (math.isinf(a[i]) and a[i] > 0) else -np.inf
+        mx = 0.0
+    elif not math.isfinite(mx):
+        reset = True
+        mx = -np.inf
+        for i in range(N):
+            a[i] = fallback[i] if has_fallback else 0.0
+            if a[i] > mx:
+                mx = a[i]
+    s = 0.0
+    s2 = 0.0
+    for i in range(N):
+        sh = a[i] - mx
+        a[i] = sh
+        v = math.exp(sh) if sh > EXP_FLOOR else 0.0
+        e[i] = v
+        s += v
+        s2 += v * v
+    return mx, s, s2, reset
+
+
+@njit(cache=True)
+def moments_run(X, e, s, mean, cov):
+    """Weighted mean (n,) and covariance (n, n) of one run's particles (zero-weight particles skipped)."""
+    N, n = X.shape
+    inv = 1.0 / s
+    for j in range(n):
+        mean[j] = 0.0
+    for i in range(N):
+        w = e[i]
+        if w > 0:
+            for j in range(n):
+                mean[j] += w * X[i, j]
+    for j in range(n):
+        mean[j] *= inv
+    for a in range(n):
+        for b in range(n):
+            cov[a, b] = 0.0
+    d = np.empty(n)
+    for i in range(N):
+        w = e[i]
+        if w > 0:
+            for j in range(n):
+                d[j] = X[i, j] - mean[j]
+            for a in range(n):
+                for b in range(a, n):
+                    cov[a, b] += w * d[a] * d[b]
+    for a in range(n):
+        for b in range(a, n):
+            cov[a, b] *= inv
+            cov[b, a] = cov[a, b]
+
+
+@njit(cache=True)
+def _weigh_run(r, Xp, logw, logN, z, valid, hk, A, idx, scale, R, angle, thr,
+               logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, e):
+    """Measurement step of run r (module docstring); leaves exp(shifted) in e and shifted log-weights in logw_out[r]."""
+    N, n = Xp.shape
+    m = z.shape[1]
+    Zp = np.empty((N, m))
+    ll = np.empty(N)
+    const, measured = measure_run(hk, A, idx, scale, R, angle, Xp, z[r], valid[r], Zp, ll)
+    offset = np.empty(N)
+    uniform = True
+    for i in range(N):
+        o = logw[r, i] + logN
+        offset[i] = o
+        if o != 0.0:
+            uniform = False
+    L = np.empty((m, m))
+    tmp = np.empty(m)
+    nis[r], dof[r] = predictive_run(Zp, offset, uniform, z[r], valid[r], R, angle, innov[r], S[r], L, tmp)
+    a = logw_out[r]
+    for i in range(N):
+        a[i] = ll[i] + offset[i]
+    mx, s, s2, rst = exp_shifted_run(a, offset, not uniform, e)
+    ls = math.log(s)
+    lk = mx + ls + ((const if measured else 0.0) - logN)
+    if rst:
+        lk = -np.inf
+    loglik[r] = lk if measured else 0.0
+    reset[r] = rst
+    moments_run(Xp, e, s, mean[r], cov[r])
+    es = s * s / s2
+    ess[r] = es
+    need[r] = measured and (thr < 0 or es < thr * N)
+    for i in range(N):
+        a[i] -= ls
+
+
+@njit(cache=True, inline="always")
+def _h_fast(hk, A, idx, scale, Xp, i, Zp):
+    """Zp[i] = h(Xp[i]) without per-particle array views (angle models use measure_run)."""
+    if hk == M_UNGM:
+        x = Xp[i, 0]
+        Zp[i, 0] = x * x * (1.0 / scale)
+    elif hk == M_LINEAR:
+        m, n = A.shape
+        for a in range(m):
+            acc = 0.0
+            for j in range(n):
+                acc += A[a, j] * Xp[i, j]
+            Zp[i, a] = acc
+    else:
+        s, d = A.shape
+        for a in range(s):
+            acc = 0.0
+            for j in range(d):
+                t = Xp[i, idx[j]] - A[a, j]
+                acc += t * t
+            Zp[i, a] = math.sqrt(acc) / scale
+
+
+@njit(cache=True)
+def _fast_run(r, X, logw, logN, noise, g, per_run, mk, F, G, par, hk, A, idx, scale, R, rkind, thr,
+              Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need):
+    """The whole step of run r when every component is measured and no component is an angle.
+
+    Fused passes over the particles: (1) propagate, measure, log-weights and
+    the predictive mean; (2) exp, sums, weighted mean and the predictive
+    spread; (3) covariance; (4) resampling.  Same arithmetic as the general
+    path up to the order of summation.
+    """
+    N, n = X.shape[1], X.shape[2]
+    m = R.shape[0]
+    Xin = X[r]
+    lw = logw[r]
+    a = logw_out[r]
+    Xp = np.empty((N, n))
+    Zp = np.empty((N, m))
+    nz = noise[r]
+    if per_run:
+        for i in range(nz.shape[0]):
+            nz[i] = g.standard_normal()
+    uniform = True
+    for i in range(N):
+        if lw[i] + logN != 0.0:
+            uniform = False
+            break
+    invN = 1.0 / N
+    const = 0.0
+    for j in range(m):
+        const += -0.5 * (math.log(R[j, j]) + LOG_2PI)
+    zr = np.empty(m)
+    hR = np.empty(m)
+    for j in range(m):
+        hR[j] = -0.5 / R[j, j]
+    zvec = innov[r]  # holds z on entry (set by the caller), innovation on exit
+    for j in range(m):
+        zr[j] = zvec[j]
+    zhat = np.zeros(m)
+    mx = -np.inf
+    nan_seen = False
+    # pass 1
+    if mk == UNGM:
+        pa, pb, forcing, sq = par[0], par[1], par[2], par[3]
+    for i in range(N):
+        if mk == UNGM:
+            x = Xin[i, 0]
+            Xp[i, 0] = nz[i] * sq + (x * (pa + pb / (x * x + 1.0)) + forcing)
+        else:
+            q = G.shape[1]
+            for a_ in range(n):
+                acc = 0.0
+                for j in range(n):
+                    acc += F[a_, j] * Xin[i, j]
+                acc2 = 0.0
+                for j in range(q):
+                    acc2 += G[a_, j] * nz[i * q + j]
+                Xp[i, a_] = acc + acc2
+        _h_fast(hk, A, idx, scale, Xp, i, Zp)
+        ll = 0.0
+        for j in range(m):
+            d = zr[j] - Zp[i, j]
+            ll += d * d * hR[j]
+        if uniform:
+            v = ll
+            for j in range(m):
+                zhat[j] += Zp[i, j]
+        else:
+            o = lw[i] + logN
+            v = ll + o
+            w = math.exp(o) * invN
+            for j in range(m):
+                zhat[j] += w * Zp[i, j]
+        if math.isnan(v):
+            v = -np.inf
+            nan_seen = True
+        a[i] = v
+        if v > mx:
+            mx = v
+    if uniform:
+        for j in range(m):
+            zhat[j] *= invN
+    rst = False
+    if not math.isfinite(mx):
+        # rare: infinite or all-zero likelihoods; the general recovery rule
+        offset = np.empty(N)
+        for i in range(N):
+            offset[i] = lw[i] + logN
+        e = np.empty(N)
+        mx, s, s2, rst = exp_shifted_run(a, offset, not uniform, e)
+    else:
+        e = np.empty(N)
+        s = 0.0
+        s2 = 0.0
+        for i in range(N):
+            sh = a[i] - mx
+            a[i] = sh
+            v = math.exp(sh) if sh > EXP_FLOOR else 0.0
+            e[i] = v
+            s += v
+            s2 += v * v
+    # pass 2: weighted mean and predictive spread
+    mu = mean[r]
+    for j in range(n):
+        mu[j] = 0.0
+    P = np.zeros((m, m))
+    D = np.empty(m)
+    for i in range(N):
+        w = e[i]
+        if w > 0:
+            for j in range(n):
+                mu[j] += w * Xp[i, j]
+        wp = invN if uniform else math.exp(lw[i] + logN) * invN
+        for j in range(m):
+            D[j] = Zp[i, j] - zhat[j]
+        for p in range(m):
+            for q_ in range(p, m):
+                P[p, q_] += wp * D[p] * D[q_]
+    inv = 1.0 / s
+    for j in range(n):
+        mu[j] *= inv
+    # pass 3: covariance
+    C = cov[r]
+    for p in range(n):
+        for q_ in range(n):
+            C[p, q_] = 0.0
+    d = np.empty(n)
+    for i in range(N):
+        w = e[i]
+        if w > 0:
+            for j in range(n):
+                d[j] = Xp[i, j] - mu[j]
+            for p in range(n):
+                for q_ in range(p, n):
+                    C[p, q_] += w * d[p] * d[q_]
+    for p in range(n):
+        for q_ in range(p, n):
+            C[p, q_] *= inv
+            C[q_, p] = C[p, q_]
+    # innovation statistics
+    Sr = S[r]
+    tmp = np.empty(m)
+    for p in range(m):
+        zvec[p] = zr[p] - zhat[p]
+        tmp[p] = zvec[p]
+        for q_ in range(m):
+            Sr[p, q_] = (P[p, q_] if p <= q_ else P[q_, p]) + R[p, q_]
+    L = np.empty((m, m))
+    nis[r] = chol_quad(L, tmp.copy(), tmp) if cholesky_inplace(Sr, L) else np.nan
+    dof[r] = m
+    ls = math.log(s)
+    loglik[r] = -np.inf if rst else mx + ls + (const - logN)
+    reset[r] = rst
+    es = s * s / s2
+    ess[r] = es
+    nd = thr < 0 or es < thr * N
+    need[r] = nd
+    if nd and per_run:
+        if rkind == R_SYSTEMATIC:
+            systematic_fill_rows(e, s, g.random(), Xp, Xout[r])
+            for i in range(N):
+                a[i] = -logN
+        else:
+            nu = n_uniforms(rkind, N)
+            U = np.empty(nu)
+            for i in range(nu):
+                U[i] = g.random()
+            for i in range(N):
+                a[i] -= ls
+            _resample_run(r, rkind, Xp, e, U, Xout, logw_out, logN)
+    else:
+        Xout[r] = Xp
+        for i in range(N):
+            a[i] -= ls
+
+
+@njit(cache=True)
+def systematic_fill(e, s, u0, src, dst):
+    """Systematic resampling of a 1-D particle set without branches.
+
+    With b_i = ceil(N c_i − u0) the positions (u0 + j)/N below cumulative
+    weight c_i, output j takes particle #{i: b_i <= j}: a histogram of the
+    b_i, a running sum, a gather.  c_i are the cumulative sums of ``e``
+    divided by their total ``s`` (the last exactly 1), as the NumPy resampler.
+    """
+    N = e.shape[0]
+    hist = np.zeros(N + 1, dtype=np.int64)
+    acc = 0.0
+    for i in range(N - 1):
+        acc += e[i]
+        hist[int(math.ceil((acc / s) * N - u0))] += 1
+    hist[N] += 1
+    p = 0
+    for j in range(N):
+        p += hist[j]
+        dst[j] = src[p]
+
+
+@njit(cache=True)
+def systematic_fill_rows(e, s, u0, src, dst):
+    """:func:`systematic_fill` for particles with n components (rows of ``src``)."""
+    N, n = src.shape
+    hist = np.zeros(N + 1, dtype=np.int64)
+    acc = 0.0
+    for i in range(N - 1):
+        acc += e[i]
+        hist[int(math.ceil((acc / s) * N - u0))] += 1
+    hist[N] += 1
+    p = 0
+    for j in range(N):
+        p += hist[j]
+        for t in range(n):
+            dst[j, t] = src[p, t]
+
+
+@njit(cache=True)
+def _ungm_run(r, X, logw, logN, noise, g, per_run, par, scale, Rv, rkind, thr,
+              Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need):
+    """The whole step of run r for UNGM motion and measurement (n = m = 1), all in scalars.
+
+    Same arithmetic as :func:`_fast_run`; scalar accumulators let the
+    compiler keep everything in registers.
+    """
+    N = X.shape[1]
+    xin = X[r, :, 0]
+    lw = logw[r]
+    a = logw_out[r]
+    nz = noise[r]
+    if per_run:
+        for i in range(N):
+            nz[i] = g.standard_normal()
+    uniform = True
+    for i in range(N):
+        if lw[i] + logN != 0.0:
+            uniform = False
+            break
+    invN = 1.0 / N
+    pa, pb, forcing, sq = par[0], par[1], par[2], par[3]
+    iscale = 1.0 / scale
+    hR = -0.5 / Rv
+    zr = innov[r, 0]
+    xp = np.empty(N)
+    mx = -np.inf
+    zs = 0.0
+    for i in range(N):
+        x = xin[i]
+        xn = nz[i] * sq + (x * (pa + pb / (x * x + 1.0)) + forcing)
+        xp[i] = xn
+        h = xn * xn * iscale
+        d = zr - h
+        v = d * d * hR
+        if uniform:
+            zs += h
+        else:
+            o = lw[i] + logN
+            v += o
+            zs += math.exp(o) * invN * h
+        if v != v:
+            v = -np.inf
+        a[i] = v
+        mx = max(mx, v)
+    zhat = zs * invN if uniform else zs
+    rst = False
+    e = np.empty(N)
+    if not math.isfinite(mx):
+        offset = np.empty(N)
+        for i in range(N):
+            offset[i] = lw[i] + logN
+        mx, s, s2, rst = exp_shifted_run(a, offset, not uniform, e)
+    else:
+        s = 0.0
+        s2 = 0.0
+        for i in range(N):
+            sh = a[i] - mx
+            a[i] = sh
+            v = math.exp(sh) if sh > EXP_FLOOR else 0.0
+            e[i] = v
+            s += v
+            s2 += v * v
+    mu = 0.0
+    pz = 0.0
+    for i in range(N):
+        w = e[i]
+        x = xp[i]
+        if w > 0:
+            mu += w * x
+        d = x * x * iscale - zhat
+        if uniform:
+            pz += d * d
+        else:
+            pz += math.exp(lw[i] + logN) * invN * d * d
+    if uniform:
+        pz *= invN
+    inv = 1.0 / s
+    mu *= inv
+    c2 = 0.0
+    for i in range(N):
+        w = e[i]
+        if w > 0:
+            d = xp[i] - mu
+            c2 += w * d * d
+    mean[r, 0] = mu
+    cov[r, 0, 0] = c2 * inv
+    nu = zr - zhat
+    innov[r, 0] = nu
+    Sv = pz + Rv
+    S[r, 0, 0] = Sv
+    nis[r] = nu * nu / Sv if (Sv > 0 and math.isfinite(Sv)) else np.nan
+    dof[r] = 1
+    ls = math.log(s)
+    const = -0.5 * (math.log(Rv) + LOG_2PI)
+    loglik[r] = -np.inf if rst else mx + ls + (const - logN)
+    reset[r] = rst
+    es = s * s / s2
+    ess[r] = es
+    nd = thr < 0 or es < thr * N
+    need[r] = nd
+    dst = Xout[r, :, 0]
+    if nd and per_run and rkind == R_SYSTEMATIC:
+        systematic_fill(e, s, g.random(), xp, dst)
+        for i in range(N):
+            a[i] = -logN
+    elif nd and per_run:
+        nu_ = n_uniforms(rkind, N)
+        U = np.empty(nu_)
+        for i in range(nu_):
+            U[i] = g.random()
+        for i in range(N):
+            a[i] -= ls
+        _resample_run(r, rkind, xp.reshape(N, 1), e, U, Xout, logw_out, logN)
+    else:
+        for i in range(N):
+            dst[i] = xp[i]
+            a[i] -= ls
+
+
+@njit(cache=True)
+def _step_body(r, X, logw, noise, z, valid, gens, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
+               Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need):
+    N, n = X.shape[1], X.shape[2]
+    logN = math.log(N)
+    m = z.shape[1]
+    all_valid = True
+    for j in range(m):
+        if not valid[r, j]:
+            all_valid = False
+    if all_valid and mk == UNGM and hk == M_UNGM:
+        innov[r, 0] = z[r, 0]
+        _ungm_run(r, X, logw, logN, noise, gens[r] if per_run else gens[0], per_run, par, scale, R[0, 0],
+                  rkind, thr, Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need)
+        return
+    if all_valid and not angle:
+        zv = innov[r]
+        for j in range(m):
+            zv[j] = z[r, j]
+        _fast_run(r, X, logw, logN, noise, gens[r] if per_run else gens[0], per_run, mk, F, G, par, hk, A, idx, scale, R,
+                  rkind, thr, Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need)
+        return
+    if per_run:
+        g = gens[r]
+        nz = noise[r]
+        for i in range(nz.shape[0]):
+            nz[i] = g.standard_normal()
+    Xp = np.empty((N, n))
+    propagate_run(mk, F, G, par, X[r], noise[r], Xp)
+    e = np.empty(N)
+    _weigh_run(r, Xp, logw, logN, z, valid, hk, A, idx, scale, R, angle, thr,
+               logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, e)
+    if per_run and need[r]:
+        nu = n_uniforms(rkind, N)
+        U = np.empty(nu)
+        g = gens[r]
+        for i in range(nu):
+            U[i] = g.random()
+        _resample_run(r, rkind, Xp, e, U, Xout, logw_out, logN)
+    else:
+        Xout[r] = Xp
+
+
+@njit(cache=True)
+def _resample_run(r, rkind, Xp, e, U, Xout, logw_out, logN):
+    N = Xp.shape[0]
+    c = np.empty(N)
+    tmp = np.empty(N)
+    counts = np.empty(N, dtype=np.int64)
+    resample_counts(rkind, e, U, c, tmp, counts)
+    copy_by_counts(Xp, counts, Xout[r])
+    for i in range(N):
+        logw_out[r, i] = -logN
+
+
+def _pf_step(X, logw, noise, z, valid, gens, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
+             Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need):
+    """One bootstrap-PF step for every run (outputs written in place); see the module docstring."""
+    for rr in prange(X.shape[0]):
+        r = np.int64(rr)  # prange counts in uint64
+        _step_body(r, X, logw, noise, z, valid, gens, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
+                   Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need)
+
+
+def _pf_resample(logw_out, need, U, rkind, Xout):
+    """Resample the runs in ``need`` of ``Xout`` in place from pre-drawn uniforms U (M, ·) (shared-Generator mode)."""
+    M, N = logw_out.shape
+    logN = math.log(N)
+    for rr in prange(M):
+        r = np.int64(rr)
+        if need[r]:
+            e = np.empty(N)
+            for i in range(N):
+                sh = logw_out[r, i]
+                e[i] = math.exp(sh) if sh > EXP_FLOOR else 0.0
+            _resample_run(r, rkind, Xout[r].copy(), e, U[r], Xout, logw_out, logN)
+
+
+pf_step_parallel = njit(cache=True, parallel=True)(_pf_step)
+pf_step_serial = njit(cache=True)(_pf_step)
+pf_resample_parallel = njit(cache=True, parallel=True)(_pf_resample)
