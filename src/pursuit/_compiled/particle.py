@@ -113,3 +113,90 @@ def bootstrap_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Parti
         work=work,
     )
     return new, info
+
+
+def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: ParticleState, z: np.ndarray, k: int, dt):
+    """One compiled CS-PF / ICS-PF step; same result layout as ``CuckooParticleFilter.step``."""
+    from . import cuckoo_kernels as CK
+
+    ms, hs = specs
+    search = filt.search
+    batch, B = flat_batch(state.particles)
+    N, n = state.particles.shape[-2:]
+    m = hs.dim
+    work = state.work
+    rng = state.rng
+    from ..filters.particle import _propagate
+
+    Xp = np.ascontiguousarray(_propagate(filt.motion, state.particles, k, dt, rng), dtype=float).reshape(B, N, n)
+    logw = np.ascontiguousarray(state.logw, dtype=float).reshape(B, N)
+    zf = np.ascontiguousarray(z, dtype=float).reshape(B, m)
+    valid = ~np.isnan(zf)
+    kk = 3 if search.step_scaling == "relative" else 2
+    n_norm = search.n_iter * kk * N * n
+    n_unif = search.n_iter * (N * n + 1 + 2 * N)
+    gens, per_run = typed_generators(rng, work)
+    if per_run:
+        normals = scratch(work, "compiled.cuckoo.normals", (B, n_norm))
+        uniforms = scratch(work, "compiled.cuckoo.uniforms", (B, n_unif))
+    elif search.n_iter > 0:  # the NumPy filter's draws, in its order, for the whole batch
+        normals = np.ascontiguousarray(rng.standard_normal((*batch, n_norm)).reshape(B, n_norm))
+        uniforms = np.ascontiguousarray(rng.random((*batch, n_unif)).reshape(B, n_unif))
+    else:
+        normals, uniforms = np.empty((B, 0)), np.empty((B, 0))
+    sequential = filt.weight_mode == "sequential"
+    # the NumPy fitness carries the normalising constant unless the stock all-measured fast path applies
+    include_const = bool(hs.angle or not valid.all())
+    alphas = np.array([search.alpha(t) for t in range(search.n_iter)] or [0.0])
+    pas = np.array([search.pa(t) for t in range(search.n_iter)] or [0.0])
+    trend = {"off": CK.TREND_OFF, "exp": CK.TREND_EXP, "linear": CK.TREND_LINEAR}[search.trend]
+    scaling = {"relative": CK.SCALE_RELATIVE, "absolute": CK.SCALE_ABSOLUTE, "std": CK.SCALE_STD}[search.step_scaling]
+    from ..filters.cuckoo import mantegna_sigma
+
+    lower = np.full(n, -np.inf) if search.lower is None else np.broadcast_to(np.asarray(search.lower, float), (n,)).copy()
+    upper = np.full(n, np.inf) if search.upper is None else np.broadcast_to(np.asarray(search.upper, float), (n,)).copy()
+    use_stop = search.f_stop is not None
+    log_stop = float(np.log(search.f_stop)) if use_stop else 0.0
+    rkind = RESAMPLER_CODES[filt.resampler]
+    thr = -1.0 if filt.ess_threshold is None else float(filt.ess_threshold)
+    Xout = np.empty((B, N, n))
+    logw_out = np.empty((B, N))
+    mean, cov = np.empty((B, n)), np.empty((B, n, n))
+    innov, S = np.empty((B, m)), np.empty((B, m, m))
+    nis, loglik, ess, fbest = np.empty(B), np.empty(B), np.empty(B), np.empty(B)
+    dof = np.empty(B, dtype=np.int64)
+    iters, acc = np.empty(B, dtype=np.int64), np.empty(B, dtype=np.int64)
+    reset, need = np.empty(B, dtype=np.bool_), np.empty(B, dtype=np.bool_)
+    kernel = CK.cuckoo_step_parallel if use_parallel(B) else CK.cuckoo_step_serial
+    kernel(
+        Xp, logw, bool(state.uniform), sequential, normals, uniforms, zf, valid, gens, per_run,
+        *measurement_args(hs), include_const,
+        search.n_iter, alphas, pas, float(search.alpha_min), float(search.alpha_max), trend, float(search.kappa),
+        float(search.beta), mantegna_sigma(search.beta), scaling, search.discovery == "yang", log_stop, use_stop,
+        lower, upper, filt.estimate == "best", rkind, thr,
+        Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, fbest, iters, acc,
+    )
+    if not per_run and need.any():
+        rows = np.flatnonzero(need)
+        U = np.zeros((B, K.n_uniforms(rkind, N)))
+        U[rows] = rng.random((rows.size, U.shape[1]))
+        K.pf_resample_parallel(logw_out, need, U, rkind, Xout)
+    info = {
+        "innovation": innov.reshape(*batch, m),
+        "S": S.reshape(*batch, m, m),
+        "nis": nis.reshape(batch),
+        "dof": dof.reshape(batch),
+        "loglik": loglik.reshape(batch),
+        "weights_reset": reset.reshape(batch),
+        "ess": ess.reshape(batch),
+        "resampled": need.reshape(batch),
+        "fitness_best": fbest.reshape(batch),
+        "iterations": iters.reshape(batch),
+        "acceptance": (acc / (2.0 * N * np.maximum(iters, 1))).reshape(batch),
+    }
+    uniform = bool(sequential and need.all())
+    new = ParticleState(
+        Xout.reshape(*batch, N, n), logw_out.reshape(*batch, N), mean.reshape(*batch, n), cov.reshape(*batch, n, n),
+        rng, k, uniform, work=work,
+    )
+    return new, info
