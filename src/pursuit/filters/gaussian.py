@@ -61,6 +61,7 @@ import numpy as np
 
 from .._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, mv, numerical_jacobian, quad, symmetrize
 from .._validation import in_range, nonnegative
+from ..compute import fallback_warning, resolve_backend
 from ..gaussian import Gaussian
 from ..rng import RNGLike
 from .fading import Constant, FadingContext, FadingStrategy, NoFading
@@ -179,6 +180,10 @@ class _GaussianFilter:
     fading: FadingStrategy = NoFading
     name: str = ""
     gate: float | None = field(default=None, kw_only=True)
+    backend: str | None = None
+    _specs: Any = field(init=False, repr=False, compare=False, default=None)
+
+    _compiled_kind = ""  # "ekf" or "sigma" for the classes with a compiled step
 
     def __post_init__(self) -> None:
         if self.gate is not None:
@@ -193,9 +198,40 @@ class _GaussianFilter:
             object.__setattr__(self, "fading", Constant(float(self.fading)))
         if not self.name:
             object.__setattr__(self, "name", self._default_name())
+        self._select_backend()
 
     def _default_name(self) -> str:
         return type(self).__name__
+
+    # -- compute backend ----------------------------------------------------
+    def _select_backend(self) -> None:
+        """Resolve ``backend``; for ``"numba"`` find the compiled form of the models or warn and use NumPy."""
+        object.__setattr__(self, "backend", resolve_backend(self.backend))
+        object.__setattr__(self, "_specs", None)
+        if self.backend != "numba":
+            return
+        from .._compiled.specs import LINEAR, model_specs
+
+        if not self._compiled_kind:
+            reason = type(self).__name__
+        elif type(self.fading) is not Constant:
+            reason = f"the fading strategy {type(self.fading).__name__} (compiled: a constant factor)"
+        else:
+            specs = model_specs(self.motion, self.measurement, need_diagonal=False)
+            if isinstance(specs, str):
+                reason = specs
+            elif specs[0].kind != LINEAR:
+                reason = f"motion model {type(self.motion).__name__} in a Gaussian filter (compiled: linear motion)"
+            else:
+                reason = None
+                object.__setattr__(self, "_specs", specs)
+        if reason is not None:
+            fallback_warning(self, reason)
+
+    @property
+    def compiled(self) -> bool:
+        """Whether steps run compiled (``backend="numba"`` with supported models and fading)."""
+        return self._specs is not None
 
     # -- public API ---------------------------------------------------------
     def init(self, prior: Gaussian, batch: tuple[int, ...] = (), rng: RNGLike = None) -> GaussianState:
@@ -236,7 +272,15 @@ class _GaussianFilter:
             z = np.broadcast_to(z, (*batch, z.shape[-1]))
         if np.isinf(z).any():
             raise ValueError(f"step {k}: measurement contains infinity (use NaN for a missing value)")
+        if self._specs is not None and len(batch) <= 1:
+            from .._compiled.gaussian import gaussian_step
 
+            return gaussian_step(self, self._specs, state, z, k, dt, self._compiled_kind)
+        return self._step_numpy(state, z, k, dt)
+
+    def _step_numpy(self, state: GaussianState, z: np.ndarray, k: int, dt: float | None):
+        """The NumPy step (``z`` already checked and broadcast)."""
+        batch = state.batch
         P = _core(state.cov)
         pred = self._predict(state.mean, P, k, dt)
         ctx = FadingContext(
@@ -429,7 +473,14 @@ class ExtendedKalmanFilter(_GaussianFilter):
         Fading strategy for the predict step, or a number (constant λ).
     name
         Label used in results and reports.
+    backend
+        Compute backend: ``"numpy"``, ``"numba"`` (compiled, for linear
+        motion models, the built-in measurement models and a constant fading
+        factor; see :mod:`pursuit.compute`) or ``None`` for the process
+        default.  Not the Monte Carlo engine's execution backend.
     """
+
+    _compiled_kind = "ekf"
 
     def _default_name(self) -> str:
         return "EKF"
@@ -490,6 +541,8 @@ class KalmanFilter(ExtendedKalmanFilter):
 # --------------------------------------------------------------------------
 @dataclass(frozen=True)
 class _SigmaPointFilter(_GaussianFilter):
+    _compiled_kind = "sigma"
+
     def _weights(self, n: int) -> tuple[float, np.ndarray, np.ndarray]:
         """Point scale c and mean / covariance weights; points are x and x ± c·(columns of chol P)."""
         raise NotImplementedError

@@ -1,0 +1,96 @@
+"""Glue between the Kalman-family filters and their compiled lane-major kernels (imports numba).
+
+The filter state keeps the public layout (``mean (M, n)``, ``cov (M, n, n)``)
+as transposed *views* of lane-major arrays ``(n, M)`` and ``(n, n, M)``, so
+consecutive compiled steps pass their arrays without copying.  Runs whose
+covariance does not factor are recomputed with the NumPy step (which
+repairs them) and spliced in; every other run never sees NumPy, so a run's
+result does not depend on its neighbours.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..filters.gaussian import GaussianState
+from . import gauss_kernels as GK
+from .particle import measurement_args, use_parallel
+
+__all__ = ["gaussian_step", "lanes"]
+
+
+def lanes(a: np.ndarray, core: int) -> np.ndarray:
+    """Lane-major contiguous copy (or the underlying array) of ``a (M, *core_shape)``: ``(*core_shape, M)``."""
+    order = tuple(range(1, core + 1)) + (0,)
+    t = a.transpose(order)
+    return t if t.flags.c_contiguous else np.ascontiguousarray(t)
+
+
+def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, kind: str):
+    """One compiled step of a KF/EKF (``kind="ekf"``) or UKF/CKF (``kind="sigma"``)."""
+    ms, hs = specs
+    batch = state.batch
+    M = int(np.prod(batch, dtype=int))
+    n = state.mean.shape[-1]
+    m = hs.dim
+    mean = state.mean.reshape(M, n)
+    cov = np.broadcast_to(state.cov, (*batch, n, n)).reshape(M, n, n)
+    x = lanes(mean, 1)
+    P = lanes(cov, 2)
+    zl = np.ascontiguousarray(np.broadcast_to(z, (*batch, m)).reshape(M, m).T)
+    valid = ~np.isnan(zl)
+    F, _, _ = ms.arrays(k, dt)
+    Q = np.ascontiguousarray(ms.cov(k, dt))
+    lam = float(filt.fading.lam)
+    x_out, P_out = np.empty((n, M)), np.empty((n, n, M))
+    xp, Pp, cross = np.empty((n, M)), np.empty((n, n, M)), np.empty((n, n, M))
+    innov, S = np.empty((m, M)), np.empty((m, m, M))
+    nis, loglik = np.empty(M), np.empty(M)
+    dof = np.empty(M, dtype=np.int64)
+    ok = np.ones(M, dtype=np.bool_)
+    par = use_parallel(M)
+    margs = measurement_args(hs)
+    outs = (x_out, P_out, xp, Pp, cross, innov, S, nis, dof, loglik, ok)
+    if kind == "ekf":
+        (GK.ekf_step_parallel if par else GK.ekf_step_serial)(x, P, zl, valid, F, Q, lam, *margs, *outs)
+    else:
+        cscale, wm, wc = filt._weights(n)
+        centre = wm.shape[0] % 2 == 1
+        (GK.sigma_step_parallel if par else GK.sigma_step_serial)(
+            x, P, zl, valid, F, Q, lam, *margs, float(cscale), np.ascontiguousarray(wm), np.ascontiguousarray(wc), centre, *outs
+        )
+    info = {
+        "innovation": innov.T,
+        "S": S.transpose(2, 0, 1),
+        "nis": nis,
+        "dof": dof,
+        "loglik": loglik,
+        "fading": np.full(M, lam),
+        "faded": np.full(M, lam > 1.0),
+        "repaired": np.zeros(M, dtype=bool),
+        "pred_mean": xp.T,
+        "pred_cov": Pp.transpose(2, 0, 1),
+        "cross_cov": cross.transpose(2, 0, 1),
+    }
+    new_mean, new_cov = x_out.T, P_out.transpose(2, 0, 1)
+    gated = np.zeros(M, dtype=bool)
+    if filt.gate is not None:  # the chi-square gate of the NumPy step, on the compiled results
+        from ..filters.gaussian import _apply_gate
+
+        new_mean, new_cov, gated = _apply_gate(filt.gate, info, info["pred_mean"], info["pred_cov"], new_mean, new_cov)
+    info["gated"] = gated
+    if not ok.all():  # recompute the runs whose covariance needs the NumPy repair
+        rows = np.flatnonzero(~ok)
+        sub = GaussianState(mean=mean[rows], cov=cov[rows], k=state.k, memory=None)
+        s2, i2 = filt._step_numpy(sub, np.broadcast_to(z, (*batch, m)).reshape(M, m)[rows], k, dt)
+        new_mean, new_cov = new_mean.copy(), new_cov.copy()
+        new_mean[rows], new_cov[rows] = s2.mean, s2.cov
+        for key, value in i2.items():
+            if key in info:
+                info[key] = np.array(info[key], copy=True)
+                info[key][rows] = np.broadcast_to(value, info[key][rows].shape)
+    if batch != (M,):
+        new_mean = new_mean.reshape(*batch, n)
+        new_cov = new_cov.reshape(*batch, n, n)
+        info = {key: v.reshape(*batch, *v.shape[1:]) for key, v in info.items()}
+    return GaussianState(mean=new_mean, cov=new_cov, k=k, memory=None), info
