@@ -74,6 +74,13 @@ def _add_engine_arguments(sp: argparse.ArgumentParser) -> None:
         "default auto: full unless that would take more than 1 GiB",
     )
     g.add_argument("--keep-runs", type=int, metavar="R", help="runs kept whole in summary mode (default 10)")
+    c = sp.add_argument_group("how each filter step is computed")
+    c.add_argument(
+        "--compute-backend",
+        choices=["numpy", "numba"],
+        help="default compute backend of filters whose table sets no `backend` (numba needs pursuit[fast]; "
+        "default: $PURSUIT_COMPUTE_BACKEND or numpy). Not the same as --workers/--scheduler.",
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -81,6 +88,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = _parser().parse_args(argv)
     args.argv = argv
+    if getattr(args, "compute_backend", None):
+        from .compute import set_default_backend
+
+        set_default_backend(args.compute_backend)
     try:
         if args.command == "list":
             return _cmd_list(args)

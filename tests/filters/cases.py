@@ -7,6 +7,8 @@ equality, NaN handling, determinism and the meaning of its NIS.
 
 from __future__ import annotations
 
+import importlib.util
+
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -153,3 +155,29 @@ CASES += [
 # Cases run on the nonlinear scenario too, except those that need linear models (the plain KF) or a
 # scenario of their own.
 NONLINEAR_CASES = [c for c in CASES if c.id != "kf" and not c.id.startswith("kf-") and c.scenario is None]
+
+# The compiled backend (numba, pursuit[fast]) runs the whole conformance suite too: shapes, batch
+# equals loop (bit for bit), missing data, determinism, NIS meaning.
+if importlib.util.find_spec("numba") is not None:
+    _NB = dict(backend="numba")
+    CASES += [
+        Case("kf-numba", lambda s: pu.KalmanFilter(s.motion, s.measurement, **_NB)),
+        Case("ekf-numba", lambda s: pu.ExtendedKalmanFilter(s.motion, s.measurement, **_NB)),
+        Case("ukf-numba", lambda s: pu.UnscentedKalmanFilter(s.motion, s.measurement, **_NB)),
+        Case("ckf-fading-numba", lambda s: pu.CubatureKalmanFilter(s.motion, s.measurement, fading=1.05, **_NB), exact_on_linear=False),
+        Case("pf-numba", lambda s: BootstrapParticleFilter(s.motion, s.measurement, particles=2000, **_NB), nis_tolerance=0.1, **_PF),
+        Case(
+            "pf-residual-ess-numba",
+            lambda s: BootstrapParticleFilter(s.motion, s.measurement, particles=200, resampler="residual", ess_threshold=0.7, **_NB),
+            **_PF,
+        ),
+        Case("ics-pf-numba", lambda s: ICSPF(s.motion, s.measurement, particles=100, search=CuckooSearch(n_iter=3), **_NB), **_PF),
+        Case(
+            "ics-pf-sequential-stop-numba",
+            lambda s: ICSPF(
+                s.motion, s.measurement, particles=100, weight_mode="sequential", search=CuckooSearch(n_iter=4, f_stop=0.9), **_NB
+            ),
+            **_PF,
+        ),
+    ]
+    NONLINEAR_CASES = [c for c in CASES if c.id != "kf" and not c.id.startswith("kf-") and c.scenario is None]

@@ -1,6 +1,6 @@
 """Small compiled helpers shared by the particle and Gaussian kernels: models, resampling, linear algebra.
 
-Everything here is ``@njit(cache=True)``; the model functions evaluate the
+Everything here is ``@njit(cache=True, error_model="numpy")``; the model functions evaluate the
 built-in models of :mod:`pursuit._compiled.specs` for one state vector.
 """
 
@@ -30,13 +30,13 @@ TWO_PI = 2.0 * math.pi
 EXP_FLOOR = -708.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def wrap(a):
     """Angle wrapped to [-π, π), as :func:`pursuit.models.measurement.wrap_angle`."""
     return (a + math.pi) % TWO_PI - math.pi
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def h_one(hk, A, idx, scale, x, out):
     """Noise-free measurement of one state ``x`` (n,) into ``out`` (m,)."""
     if hk == M_UNGM:
@@ -63,7 +63,7 @@ def h_one(hk, A, idx, scale, x, out):
         out[1] = math.atan2(dy, dx)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def jac_one(hk, A, idx, scale, x, out):
     """Measurement Jacobian at one state ``x`` into ``out`` (m, n) (zeros where a model has them)."""
     m, n = out.shape
@@ -100,7 +100,7 @@ def jac_one(hk, A, idx, scale, x, out):
             out[1, idx[1]] = dx / r2
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def cholesky_inplace(S, L):
     """Lower Cholesky factor of ``S`` (m, m) into ``L``; False if S is not finite and positive definite."""
     m = S.shape[0]
@@ -123,7 +123,7 @@ def cholesky_inplace(S, L):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def chol_quad(L, v, tmp):
     """vᵀ (L Lᵀ)⁻¹ v by forward substitution."""
     m = L.shape[0]
@@ -137,7 +137,7 @@ def chol_quad(L, v, tmp):
     return tot
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def spd_inverse(L, out):
     """(L Lᵀ)⁻¹ into ``out`` from a lower Cholesky factor."""
     m = L.shape[0]
@@ -161,7 +161,7 @@ def spd_inverse(L, out):
 # --------------------------------------------------------------------------
 # resampling: copy counts of one run from its weights (unnormalised) and uniforms
 # --------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _cdf(e, c):
     N = e.shape[0]
     acc = 0.0
@@ -174,7 +174,7 @@ def _cdf(e, c):
     c[N - 1] = 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def n_uniforms(kind, N):
     """Uniforms a run draws to resample (as the NumPy resamplers)."""
     if kind == R_SYSTEMATIC:
@@ -184,7 +184,7 @@ def n_uniforms(kind, N):
     return N + 1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _sorted_uniforms(U, count, out):
     """``count`` sorted uniforms from N + 1 exponential spacings (as resample._sorted_uniforms), padded with 2."""
     N = out.shape[0]
@@ -200,7 +200,7 @@ def _sorted_uniforms(U, count, out):
         out[i] = out[i] / total if i < count else 2.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _locate_counts(c, u, counts):
     """counts[bin] += 1 for each u <= 1, bin = #{j: c_j <= u} capped at N − 1 (u sorted)."""
     N = c.shape[0]
@@ -214,7 +214,7 @@ def _locate_counts(c, u, counts):
         counts[min(j, N - 1)] += 1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def resample_counts(kind, e, U, c, tmp, counts):
     """Copy counts (N,) of one run: weights ``e`` (unnormalised), uniforms ``U``, scratch ``c``, ``tmp``."""
     N = e.shape[0]
@@ -265,7 +265,7 @@ def resample_counts(kind, e, U, c, tmp, counts):
         _locate_counts(c, tmp, counts)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def copy_by_counts(src, counts, dst):
     """dst = src with particle i repeated counts[i] times (rows in order)."""
     N, n = src.shape

@@ -37,7 +37,7 @@ TREND_EXP = 1
 TREND_LINEAR = 2
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _fitness(hk, A, idx, scale, R, angle, x, z, valid, measured, full, hbuf):
     """Fitness of one particle, with the NumPy filter's arithmetic (0 where nothing is measured).
 
@@ -62,7 +62,7 @@ def _fitness(hk, A, idx, scale, R, angle, x, z, valid, measured, full, hbuf):
     return -0.5 * acc if full else acc
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _greedy(X, F, C, hk, A, idx, scale, R, angle, z, valid, measured, add, lower, upper, hbuf):
     """Keep each candidate row of C whose fitness is strictly higher; returns the number accepted."""
     N, n = X.shape
@@ -84,7 +84,7 @@ def _greedy(X, F, C, hk, A, idx, scale, R, angle, z, valid, measured, add, lower
     return acc
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _argmax(F):
     best = 0
     for i in range(1, F.shape[0]):
@@ -93,7 +93,7 @@ def _argmax(F):
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _mantegna(u, v, beta, sigma_u):
     a = abs(v)
     if beta == 1.5:
@@ -105,7 +105,7 @@ def _mantegna(u, v, beta, sigma_u):
     return (u * sigma_u) / a
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def search_run(X, F, normals, uniforms, n_iter, alphas, pas, amin, amax, trend, kappa, beta, sigma_u, scaling,
                yang, log_stop, use_stop, lower, upper, hk, A, idx, scale, R, angle, z, valid, measured, add):
     """The cuckoo search of one run, in place on X (N, n) and F (N,); returns (iterations, accepted)."""
@@ -301,5 +301,5 @@ def _cuckoo_step(Xprop, logw, state_uniform, sequential, normals, uniforms, z, v
             Xout[r] = Xp
 
 
-cuckoo_step_parallel = njit(cache=True, parallel=True)(_cuckoo_step)
-cuckoo_step_serial = njit(cache=True)(_cuckoo_step)
+cuckoo_step_parallel = njit(cache=True, parallel=True, error_model="numpy")(_cuckoo_step)
+cuckoo_step_serial = njit(cache=True, error_model="numpy")(_cuckoo_step)

@@ -39,7 +39,7 @@ from .common import (
 )
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def propagate_run(mk, F, G, par, Xin, noise, Xout):
     """x_k = f(x_{k−1}) + noise for the N particles of one run (noise: N·q standard normals)."""
     N, n = Xin.shape
@@ -61,7 +61,7 @@ def propagate_run(mk, F, G, par, Xin, noise, Xout):
                 Xout[i, a_] = acc + acc2
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def measure_run(hk, A, idx, scale, R, angle, X, z, valid, Zp, ll):
     """Predicted measurements Zp (N, m) and ll (N,) = −½ Σ_valid ν²/R_jj; returns the constant and measured flag."""
     N = X.shape[0]
@@ -88,7 +88,7 @@ def measure_run(hk, A, idx, scale, R, angle, X, z, valid, Zp, ll):
     return const, measured
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def predictive_run(Zp, offset, uniform, z, valid, R, angle, innov, S, L, tmp):
     """Innovation, S and NIS of one run from predicted measurements and predictive weights exp(offset)/N."""
     N, m = Zp.shape
@@ -139,7 +139,7 @@ def predictive_run(Zp, offset, uniform, z, valid, R, angle, innov, S, L, tmp):
     return nis, dof
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def exp_shifted_run(a, fallback, has_fallback, e):
     """e = exp(a − max a) with NaN as −inf and the zero-likelihood recovery; returns (mx, s, s2, reset)."""
     N = a.shape[0]
@@ -175,7 +175,7 @@ def exp_shifted_run(a, fallback, has_fallback, e):
     return mx, s, s2, reset
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def moments_run(X, e, s, mean, cov):
     """Weighted mean (n,) and covariance (n, n) of one run's particles (zero-weight particles skipped)."""
     N, n = X.shape
@@ -207,7 +207,7 @@ def moments_run(X, e, s, mean, cov):
             cov[b, a] = cov[a, b]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _weigh_run(r, Xp, logw, logN, z, valid, hk, A, idx, scale, R, angle, thr,
                logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, e):
     """Measurement step of run r (module docstring); leaves exp(shifted) in e and shifted log-weights in logw_out[r]."""
@@ -244,7 +244,7 @@ def _weigh_run(r, Xp, logw, logN, z, valid, hk, A, idx, scale, R, angle, thr,
         a[i] -= ls
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _h_fast(hk, A, idx, scale, Xp, i, Zp):
     """Zp[i] = h(Xp[i]) without per-particle array views (angle models use measure_run)."""
     if hk == M_UNGM:
@@ -267,7 +267,7 @@ def _h_fast(hk, A, idx, scale, Xp, i, Zp):
             Zp[i, a] = math.sqrt(acc) / scale
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _fast_run(r, X, logw, logN, noise, g, per_run, mk, F, G, par, hk, A, idx, scale, R, rkind, thr,
               Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need):
     """The whole step of run r when every component is measured and no component is an angle.
@@ -442,7 +442,7 @@ def _fast_run(r, X, logw, logN, noise, g, per_run, mk, F, G, par, hk, A, idx, sc
             a[i] -= ls
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def systematic_fill(e, s, u0, src, dst):
     """Systematic resampling of a 1-D particle set without branches.
 
@@ -464,7 +464,7 @@ def systematic_fill(e, s, u0, src, dst):
         dst[j] = src[p]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def systematic_fill_rows(e, s, u0, src, dst):
     """:func:`systematic_fill` for particles with n components (rows of ``src``)."""
     N, n = src.shape
@@ -481,7 +481,7 @@ def systematic_fill_rows(e, s, u0, src, dst):
             dst[j, t] = src[p, t]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _ungm_run(r, X, logw, logN, noise, g, per_run, par, scale, Rv, rkind, thr,
               Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need):
     """The whole step of run r for UNGM motion and measurement (n = m = 1), all in scalars.
@@ -602,7 +602,7 @@ def _ungm_run(r, X, logw, logN, noise, g, per_run, par, scale, Rv, rkind, thr,
             a[i] -= ls
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _step_body(r, X, logw, noise, z, valid, gens, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
                Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need):
     N, n = X.shape[1], X.shape[2]
@@ -645,7 +645,7 @@ def _step_body(r, X, logw, noise, z, valid, gens, per_run, mk, F, G, par, hk, A,
         Xout[r] = Xp
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _resample_run(r, rkind, Xp, e, U, Xout, logw_out, logN):
     N = Xp.shape[0]
     c = np.empty(N)
@@ -680,6 +680,6 @@ def _pf_resample(logw_out, need, U, rkind, Xout):
             _resample_run(r, rkind, Xout[r].copy(), e, U[r], Xout, logw_out, logN)
 
 
-pf_step_parallel = njit(cache=True, parallel=True)(_pf_step)
-pf_step_serial = njit(cache=True)(_pf_step)
-pf_resample_parallel = njit(cache=True, parallel=True)(_pf_resample)
+pf_step_parallel = njit(cache=True, parallel=True, error_model="numpy")(_pf_step)
+pf_step_serial = njit(cache=True, error_model="numpy")(_pf_step)
+pf_resample_parallel = njit(cache=True, parallel=True, error_model="numpy")(_pf_resample)

@@ -50,6 +50,13 @@ register(
 )(Constant)
 
 NAME = Param("name", "str", None, "label in tables and figures (default: the filter's short name)")
+BACKEND = Param(
+    "backend",
+    "str",
+    None,
+    "compute backend: numpy or numba (compiled, pursuit[fast]); default: the CLI's --compute-backend, else numpy",
+    choices=("numpy", "numba"),
+)
 FADING = Param("fading", "any", 1.0, "fading factor λ >= 1, or a table {type = ..., ...}", check=build_fading)
 
 
@@ -66,6 +73,8 @@ GATE = Param(
 
 def make_filter(cls, scenario, where: str, name: str | None, **kw):
     """Build ``cls(scenario.motion, scenario.measurement, ...)``, re-anchoring errors under ``where``."""
+    if kw.get("backend", "") is None:
+        kw.pop("backend")
     try:
         return cls(scenario.motion, scenario.measurement, name=name or "", **kw)
     except TypeError as e:  # the filter cannot use this scenario's models
@@ -74,14 +83,19 @@ def make_filter(cls, scenario, where: str, name: str | None, **kw):
         raise ValueError(f"{where}.{e}") from None
 
 
-@register("filter", "kf", "Linear Kalman filter (Joseph form)", params=(NAME, FADING, GATE))
-def _kf(scenario, where="filter", name=None, fading=None, gate=None):
-    return make_filter(KalmanFilter, scenario, where, name, fading=fading, gate=gate)
+@register("filter", "kf", "Linear Kalman filter (Joseph form)", params=(NAME, FADING, GATE, BACKEND))
+def _kf(scenario, where="filter", name=None, fading=None, gate=None, backend=None):
+    return make_filter(KalmanFilter, scenario, where, name, fading=fading, gate=gate, backend=backend)
 
 
-@register("filter", "ekf", "Extended Kalman filter (Joseph form; numerical Jacobians if the model has none)", params=(NAME, FADING, GATE))
-def _ekf(scenario, where="filter", name=None, fading=None, gate=None):
-    return make_filter(ExtendedKalmanFilter, scenario, where, name, fading=fading, gate=gate)
+@register(
+    "filter",
+    "ekf",
+    "Extended Kalman filter (Joseph form; numerical Jacobians if the model has none)",
+    params=(NAME, FADING, GATE, BACKEND),
+)
+def _ekf(scenario, where="filter", name=None, fading=None, gate=None, backend=None):
+    return make_filter(ExtendedKalmanFilter, scenario, where, name, fading=fading, gate=gate, backend=backend)
 
 
 @register(
@@ -95,12 +109,15 @@ def _ekf(scenario, where="filter", name=None, fading=None, gate=None):
         Param("beta", "float", 2.0, "prior-knowledge weight (2 is optimal for Gaussians)"),
         Param("kappa", "float", 0.0, "secondary scaling"),
         GATE,
+        BACKEND,
     ),
 )
-def _ukf(scenario, where="filter", name=None, fading=None, alpha=1.0, beta=2.0, kappa=0.0, gate=None):
-    return make_filter(UnscentedKalmanFilter, scenario, where, name, fading=fading, alpha=alpha, beta=beta, kappa=kappa, gate=gate)
+def _ukf(scenario, where="filter", name=None, fading=None, alpha=1.0, beta=2.0, kappa=0.0, gate=None, backend=None):
+    return make_filter(
+        UnscentedKalmanFilter, scenario, where, name, fading=fading, alpha=alpha, beta=beta, kappa=kappa, gate=gate, backend=backend
+    )
 
 
-@register("filter", "ckf", "Cubature Kalman filter (third-degree spherical-radial rule)", params=(NAME, FADING, GATE))
-def _ckf(scenario, where="filter", name=None, fading=None, gate=None):
-    return make_filter(CubatureKalmanFilter, scenario, where, name, fading=fading, gate=gate)
+@register("filter", "ckf", "Cubature Kalman filter (third-degree spherical-radial rule)", params=(NAME, FADING, GATE, BACKEND))
+def _ckf(scenario, where="filter", name=None, fading=None, gate=None, backend=None):
+    return make_filter(CubatureKalmanFilter, scenario, where, name, fading=fading, gate=gate, backend=backend)

@@ -10,7 +10,7 @@ from ..filters.resample import RESAMPLERS
 from ..filters.upf import PartialUPF
 from ..registry import Param, register
 from ..scenarios.ungm import UNGM
-from .filters import NAME
+from .filters import BACKEND, NAME
 
 _RESAMPLER = Param("resampler", "str", "systematic", "resampling scheme", choices=tuple(RESAMPLERS))
 _PARTICLES = Param("particles", "int", 1000, "number of particles N per run")
@@ -35,15 +35,24 @@ def _checked(where: str, build):
         _RESAMPLER,
         Param("resample", "str", "always", "when to resample", choices=("always", "ess", "never")),
         Param("ess_threshold", "float", 0.5, "with resample = 'ess': resample when ESS < ess_threshold * N"),
+        BACKEND,
     ),
     aliases=("sir",),
 )
-def _pf(scenario, where="filter", name=None, particles=1000, resampler="systematic", resample="always", ess_threshold=0.5):
+def _pf(
+    scenario, where="filter", name=None, particles=1000, resampler="systematic", resample="always", ess_threshold=0.5, backend=None
+):
     thr = {"always": None, "ess": ess_threshold, "never": 0.0}[resample]
     return _checked(
         where,
         lambda: BootstrapParticleFilter(
-            scenario.motion, scenario.measurement, particles=particles, resampler=resampler, ess_threshold=thr, name=name or ""
+            scenario.motion,
+            scenario.measurement,
+            particles=particles,
+            resampler=resampler,
+            ess_threshold=thr,
+            name=name or "",
+            backend=backend,
         ),
     )
 
@@ -84,6 +93,7 @@ _CUCKOO_COMMON = (
     Param("ess_threshold", "float", 0.5, "with weight_mode = 'sequential': resample when ESS < ess_threshold * N"),
     Param("estimate", "str", "mean", "weighted mean or best nest", choices=("mean", "best")),
     _RESAMPLER,
+    BACKEND,
 )
 
 

@@ -1,0 +1,271 @@
+"""The compiled (numba) backend agrees with NumPy, stays batch invariant, caches, and falls back clearly.
+
+Skipped when numba is not installed (``make test`` installs it through the
+``test`` extra).  Agreement is relative 1e-9 (observed: about 1e-13): the
+compiled code draws the same random numbers and follows the same formulas,
+only sums in another order.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("numba")
+
+import pursuit as pu  # noqa: E402
+from pursuit import compute  # noqa: E402
+from pursuit.compute import CompiledBackendWarning  # noqa: E402
+from pursuit.filters.cuckoo import CuckooSearch  # noqa: E402
+from pursuit.models import ConstantVelocity, LinearGaussian, RangeBearing, RangeSensors  # noqa: E402
+from pursuit.rng import run_streams  # noqa: E402
+from pursuit.scenarios.ungm import UNGM  # noqa: E402
+
+RTOL = 1e-9
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _close(a, b, what):
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    assert a.shape == b.shape, what
+    assert np.array_equal(np.isnan(a), np.isnan(b)), f"{what}: NaN pattern differs"
+    fin = np.isfinite(a) & np.isfinite(b)
+    assert np.array_equal(a[~fin], b[~fin], equal_nan=True), f"{what}: infinities differ"
+    err = np.max(np.abs(a[fin] - b[fin]) / (1.0 + np.abs(a[fin])), initial=0.0)
+    assert err <= RTOL, f"{what}: relative difference {err:.3g}"
+
+
+def _same_tracks(make, zs, prior, rngs):
+    for rng in rngs:
+        a = pu.run(make("numpy"), zs, prior, rng=rng())
+        b = pu.run(make("numba"), zs, prior, rng=rng())
+        _close(a.mean, b.mean, "mean")
+        _close(a.cov, b.cov, "cov")
+        assert sorted(a.info) == sorted(b.info)
+        for key in a.info:
+            _close(a.info[key], b.info[key], key)
+
+
+def _ungm(M=6, T=25):
+    sc = UNGM(steps=T)
+    return sc, sc.simulate(run_streams(1, range(M), 0), M)
+
+
+def _cv_data(meas, M=5, T=20, seed=3):
+    mot = ConstantVelocity(ndim=2, dt=1.0, q=0.01)
+    rng = np.random.default_rng(seed)
+    x0 = np.array([10.0, 0.5, 40.0, 0.8])
+    x = np.tile(x0, (M, 1))
+    zs = np.empty((T, M, meas.dim))
+    for k in range(T):
+        x = mot.sample(x, k + 1, rng)
+        zs[k] = meas.sample(x, k + 1, rng)
+    zs[4, 1, 0] = np.nan  # one missing component
+    zs[6] = np.nan  # a step with nothing measured
+    return mot, zs, pu.Gaussian(x0, np.diag([1.5, 1.4, 0.9, 0.03]))
+
+
+STREAMS = (lambda: run_streams(5, range(6), 1), lambda: np.random.default_rng(11))
+MEASUREMENTS = {
+    "range": RangeSensors([[0.0, 0.0], [100.0, 0.0]], 2.0, (0, 2)),
+    "range-bearing": RangeBearing([0.0, -50.0], 1.0, 0.02),
+    "linear": LinearGaussian.position(4, (0, 2), 1.0),
+}
+
+
+@pytest.mark.parametrize("resampler", ["systematic", "stratified", "multinomial", "residual"])
+@pytest.mark.parametrize("ess", [None, 0.5])
+def test_bootstrap_pf_ungm_agrees(resampler, ess):
+    sc, sim = _ungm()
+
+    def make(be):
+        return pu.BootstrapParticleFilter(sc.motion, sc.measurement, particles=300, resampler=resampler, ess_threshold=ess, backend=be)
+
+    _same_tracks(make, sim.measurements, sim.prior, STREAMS)
+
+
+@pytest.mark.parametrize("kind", sorted(MEASUREMENTS))
+def test_bootstrap_pf_cv_agrees_with_missing_data(kind):
+    mot, zs, prior = _cv_data(MEASUREMENTS[kind], M=6)
+
+    def make(be):
+        return pu.BootstrapParticleFilter(mot, MEASUREMENTS[kind], particles=300, ess_threshold=0.5, backend=be)
+
+    _same_tracks(make, zs, prior, STREAMS)
+
+
+CUCKOO = {
+    "ics": lambda m, h, be: pu.ICSPF(m, h, particles=60, backend=be),
+    "cs": lambda m, h, be: pu.CSPF(m, h, particles=60, backend=be),
+    "ics-sequential-best": lambda m, h, be: pu.ICSPF(m, h, particles=60, weight_mode="sequential", estimate="best", backend=be),
+    "ics-options": lambda m, h, be: pu.ICSPF(
+        m, h, particles=60, backend=be,
+        search=CuckooSearch(n_iter=5, step_scaling="absolute", trend="linear", discovery="literal_pa", f_stop=0.95, beta=1.2),
+    ),
+}
+
+
+@pytest.mark.parametrize("variant", sorted(CUCKOO))
+def test_cuckoo_pf_ungm_agrees(variant):
+    sc, sim = _ungm(M=6, T=15)
+    _same_tracks(lambda be: CUCKOO[variant](sc.motion, sc.measurement, be), sim.measurements, sim.prior, STREAMS)
+
+
+CUCKOO_MEASUREMENTS = {
+    # one range node, as p1-wsn.  With two or more stock Gaussian components NumPy sums the fitness
+    # with a fused multiply-add (einsum); the search amplifies that 1-ulp difference to about 1e-8
+    # after a few steps (docs/compiled-backend.md), so those models are compared in the docs only.
+    "range": RangeSensors([[0.0, 0.0]], 0.85, (0, 2)),
+    "range-bearing": MEASUREMENTS["range-bearing"],
+}
+
+
+@pytest.mark.parametrize("kind", sorted(CUCKOO_MEASUREMENTS))
+def test_cuckoo_pf_cv_agrees_with_missing_data(kind):
+    meas = CUCKOO_MEASUREMENTS[kind]
+    mot, zs, prior = _cv_data(meas, M=6, T=15)
+    _same_tracks(lambda be: CUCKOO["ics"](mot, meas, be), zs, prior, STREAMS)
+
+
+GAUSSIAN = {
+    "kf": pu.KalmanFilter,
+    "ekf": pu.ExtendedKalmanFilter,
+    "ukf": pu.UnscentedKalmanFilter,
+    "ckf": pu.CubatureKalmanFilter,
+}
+
+
+@pytest.mark.parametrize("fading", [1.0, 1.23])
+@pytest.mark.parametrize("filt", sorted(GAUSSIAN))
+@pytest.mark.parametrize("kind", sorted(MEASUREMENTS))
+def test_gaussian_filters_agree(filt, kind, fading):
+    if filt == "kf" and kind != "linear":
+        pytest.skip("the KF needs a linear measurement model")
+    mot, zs, prior = _cv_data(MEASUREMENTS[kind], M=7, T=20)
+    prior = pu.Gaussian(prior.mean + 1.0, prior.cov)
+    for rng in (None,):
+        a = pu.run(GAUSSIAN[filt](mot, MEASUREMENTS[kind], fading=fading), zs, prior, store_predictions=True)
+        b = pu.run(GAUSSIAN[filt](mot, MEASUREMENTS[kind], fading=fading, backend="numba"), zs, prior, store_predictions=True)
+        _close(a.mean, b.mean, "mean")
+        _close(a.cov, b.cov, "cov")
+        assert sorted(a.info) == sorted(b.info)
+        for key in a.info:
+            _close(a.info[key], b.info[key], key)
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda m, h: pu.BootstrapParticleFilter(m, h, particles=200, ess_threshold=0.5, backend="numba"),
+        lambda m, h: pu.ICSPF(m, h, particles=50, backend="numba"),
+        lambda m, h: pu.UnscentedKalmanFilter(m, h, backend="numba"),
+    ],
+    ids=["pf", "ics-pf", "ukf"],
+)
+def test_run_alone_equals_run_in_batch_bitwise(make, request):
+    mot, zs, prior = _cv_data(MEASUREMENTS["range"], M=6, T=12)
+    filt = make(mot, MEASUREMENTS["range"])
+    if "ics-pf" in request.node.name:
+        # Known quirk shared with the NumPy cuckoo filters: their fitness carries the normalising
+        # constant when any run of the batch misses a component, so only complete data is batch invariant.
+        zs = _cv_data(MEASUREMENTS["range"], M=6, T=12)[1]
+        zs[4, 1, 0] = zs[4, 0, 0]
+        zs[6] = zs[5]
+    whole = pu.run(filt, zs, prior, rng=run_streams(9, range(6), 1))
+    for i in (0, 4):
+        alone = pu.run(filt, zs[:, i : i + 1], prior, rng=run_streams(9, [i], 1))
+        assert np.array_equal(alone.mean[:, 0], whole.mean[:, i])
+        assert np.array_equal(alone.cov[:, 0], whole.cov[:, i])
+
+
+def test_user_models_fall_back_with_a_warning():
+    class MyMotion:  # a user's model: same numbers as ConstantVelocity, not a built-in type
+        def __init__(self):
+            self._cv = ConstantVelocity(ndim=2, dt=1.0, q=0.01)
+            self.dim = 4
+
+        def __getattr__(self, name):
+            return getattr(self._cv, name)
+
+    meas = MEASUREMENTS["linear"]
+    with pytest.warns(CompiledBackendWarning, match="motion model MyMotion"):
+        pf = pu.BootstrapParticleFilter(MyMotion(), meas, particles=20, backend="numba")
+    assert pf.backend == "numba" and not pf.compiled
+    with pytest.warns(CompiledBackendWarning, match="fading strategy StrongTracking"):
+        assert not pu.ExtendedKalmanFilter(ConstantVelocity(), meas, fading=pu.StrongTracking(), backend="numba").compiled
+    with pytest.warns(CompiledBackendWarning, match="PartialUPF"):
+        pu.PartialUPF(ConstantVelocity(), meas, particles=20, backend="numba")
+    with pytest.warns(CompiledBackendWarning, match="step_scaling='std'"):
+        pu.ICSPF(ConstantVelocity(), meas, particles=20, search=CuckooSearch(step_scaling="std"), backend="numba")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert pu.UnscentedKalmanFilter(ConstantVelocity(), meas, backend="numba").compiled
+
+
+EXPERIMENTS = ["p1-ungm", "p1-wsn", "p2-toa", "p3-upf", "p4-maneuver", "wsn-gaussian"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", EXPERIMENTS)
+def test_builtin_experiments_agree(name, monkeypatch):
+    """Every bundled experiment, run with the numba default, gives NumPy's estimates to 1e-9 (same seed)."""
+    from pursuit.experiment import find_experiment, load_experiment
+
+    monkeypatch.delenv(compute.ENV_VAR, raising=False)
+    outs = {}
+    for be in ("numpy", "numba"):
+        compute.set_default_backend(be)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", CompiledBackendWarning)
+                exp = load_experiment(find_experiment(name))
+                outs[be] = exp.run(runs=3, progress=False)
+        finally:
+            compute.set_default_backend(None)
+    a, b = outs["numpy"].results, outs["numba"].results
+    assert sorted(a) == sorted(b)
+    compared = 0
+    for key in a:
+        for fname, fa in a[key].filters.items():
+            fb = b[key].filters[fname]
+            _close(fa.estimates, fb.estimates, f"{name} {key} {fname}")
+            compared += 1
+    assert compared > 0
+
+
+def test_second_process_loads_compiled_code_from_the_cache(tmp_path):
+    """cache=True: after one process compiled the kernels, a fresh one loads them (cache hits, no misses)."""
+    code = r"""
+import numpy as np, pursuit as pu, warnings
+from pursuit.rng import run_streams
+from pursuit.scenarios.ungm import UNGM
+from pursuit._compiled import pf_kernels as K, gauss_kernels as GK
+from pursuit.models import ConstantVelocity, LinearGaussian
+sc = UNGM(steps=3); sim = sc.simulate(run_streams(1, range(2), 0), 2)
+pu.run(pu.BootstrapParticleFilter(sc.motion, sc.measurement, particles=50, backend="numba"), sim.measurements, sim.prior, rng=run_streams(2, range(2), 1))
+mot = ConstantVelocity(); meas = LinearGaussian.position(4, (0, 2), 1.0)
+pu.run(pu.KalmanFilter(mot, meas, backend="numba"), np.zeros((3, 2, 2)), pu.Gaussian(np.zeros(4), np.eye(4)))
+for d in (K.pf_step_parallel, GK.ekf_step_parallel):
+    print(d.__name__ if hasattr(d, "__name__") else d, dict(d.stats.cache_hits), dict(d.stats.cache_misses))
+"""
+    env = dict(os.environ)
+    first = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env=env)
+    assert first.returncode == 0, first.stderr
+    second = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env=env)
+    assert second.returncode == 0, second.stderr
+    lines = [ln for ln in second.stdout.splitlines() if "{" in ln]
+    assert len(lines) == 2
+    for ln in lines:
+        hits, misses = ln.split("} {")
+        assert ": 1" in hits or ": 2" in hits, ln  # loaded from the cache
+        assert misses.strip().rstrip("}") == "", ln  # nothing compiled
+    cache_dir = ROOT / "src" / "pursuit" / "_compiled" / "__pycache__"
+    if "NUMBA_CACHE_DIR" not in os.environ and cache_dir.is_dir():
+        assert any(p.suffix == ".nbi" for p in cache_dir.iterdir())
