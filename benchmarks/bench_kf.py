@@ -1,45 +1,42 @@
-"""Kalman filter throughput: pursuit (batched over runs) against FilterPy (one run at a time).
+"""Kalman filters: pursuit (NumPy and numba) against FilterPy, simdkalman and Stone Soup on identical work.
 
-Work: a 4-state constant-velocity model with 2-D position measurements,
-M = 1000 runs x T = 1000 steps.  A filter-step is one predict + update of one
-run.  pursuit filters all runs at once; FilterPy has no batch mode, so it
-filters runs one after another, and its rate is measured on fewer runs (its
-cost per step does not depend on the number of runs).
+Work (the same model, sizes and measurements for every implementation):
 
-Rows:
+* **KF**: 2-D constant-velocity target (4 states, continuous white-noise
+  acceleration q = 0.01, dt = 1), position measured with unit variance,
+  M = 1000 runs x T = 1000 steps.  A filter-step is one predict + update of
+  one run.
+* **UKF**: the same motion with a range-bearing sensor at (0, -50)
+  (σ = 1 m, 0.02 rad), scaled sigma points α = 1, β = 2, κ = 0, M = 1000
+  runs x T = 200 steps.
 
-* ``pursuit KF (shared P)``: the usual Monte Carlo case — every run starts
-  from the same prior covariance, so the Riccati recursion is computed once
-  for the batch (exact, not an approximation).
-* ``pursuit KF (per-run P)``: each run has its own prior covariance stack,
-  so every run carries its own covariance — the general path.
-* ``pursuit UKF``: the same work through the unscented filter.
-* ``FilterPy KF``: ``filterpy.kalman.KalmanFilter.predict`` + ``update``.
+pursuit and simdkalman filter all runs at once.  FilterPy and Stone Soup
+have no batch mode: they filter one run after another, and their rate is
+measured on fewer runs (their cost per step does not depend on the number of
+runs); the table says how many.  ``numba 1 thread`` / ``2 threads`` use
+``numba.set_num_threads``.
 
 Run::
 
-    .venv/bin/python benchmarks/bench_kf.py            # FilterPy row if filterpy is importable
-    make bench                                          # all benchmarks, peers in .bench-venv
+    make bench                                        # everything, peers in .bench-venv
+    .bench-venv/bin/python benchmarks/run.py --only kf
 """
 
 from __future__ import annotations
 
 import statistics
 import time
+import warnings
+from datetime import datetime, timedelta
 
 import numpy as np
 
 import pursuit as pu
-from pursuit.models import ConstantVelocity, LinearGaussian
+from pursuit.models import ConstantVelocity, LinearGaussian, RangeBearing
 
 REPEATS = 3
-
-
-def _work(runs: int, steps: int, seed: int = 0):
-    motion = ConstantVelocity(ndim=2, dt=1.0, q=0.01)
-    meas = LinearGaussian.position(motion.dim, motion.position_indices, 1.0)
-    zs = np.random.default_rng(seed).standard_normal((steps, runs, 2)) * 3.0
-    return motion, meas, zs
+SENSOR = (0.0, -50.0)
+SIG_R, SIG_B = 1.0, 0.02
 
 
 def _time(fn, repeats: int = REPEATS) -> float:
@@ -52,63 +49,224 @@ def _time(fn, repeats: int = REPEATS) -> float:
     return statistics.median(times)
 
 
-def pursuit_rate(kind: str, runs: int, steps: int) -> float:
-    """Filter-steps per second for pursuit's batched filters."""
-    motion, meas, zs = _work(runs, steps)
-    if kind == "kf-shared":
-        filt, prior = pu.KalmanFilter(motion, meas), pu.Gaussian(np.zeros(4), np.eye(4))
-    elif kind == "kf-per-run":
-        filt = pu.KalmanFilter(motion, meas)
-        prior = pu.Gaussian(np.zeros((runs, 4)), np.broadcast_to(np.eye(4), (runs, 4, 4)).copy())
-    elif kind == "ukf":
-        filt, prior = pu.UnscentedKalmanFilter(motion, meas), pu.Gaussian(np.zeros(4), np.eye(4))
+def _motion():
+    return ConstantVelocity(ndim=2, dt=1.0, q=0.01, noise="continuous")
+
+
+def kf_work(runs: int, steps: int, seed: int = 0):
+    motion = _motion()
+    meas = LinearGaussian.position(4, motion.position_indices, 1.0)
+    zs = np.random.default_rng(seed).standard_normal((steps, runs, 2)) * 3.0
+    return motion, meas, zs
+
+
+def ukf_work(runs: int, steps: int, seed: int = 0):
+    motion = _motion()
+    meas = RangeBearing(np.array(SENSOR), SIG_R, SIG_B)
+    rng = np.random.default_rng(seed)
+    x = np.tile([0.0, 1.0, 0.0, 0.5], (runs, 1))
+    zs = np.empty((steps, runs, 2))
+    for k in range(steps):
+        x = motion.sample(x, k + 1, rng)
+        zs[k] = meas.sample(x, k + 1, rng)
+    return motion, meas, zs
+
+
+def _threads(n: int | None):
+    if n is not None:
+        import numba
+
+        numba.set_num_threads(n)
+
+
+def pursuit_rate(kind: str, runs: int, steps: int, backend: str = "numpy", shared: bool = True, threads: int | None = None) -> float:
+    """Filter-steps per second of pursuit's batched filters."""
+    if kind == "kf":
+        motion, meas, zs = kf_work(runs, steps)
+        cls = pu.KalmanFilter
     else:
-        raise ValueError(kind)
-    t = _time(lambda: pu.run(filt, zs, prior, keep_cov=False))
-    return runs * steps / t
+        motion, meas, zs = ukf_work(runs, steps)
+        cls = pu.UnscentedKalmanFilter
+    filt = cls(motion, meas, backend=backend)
+    prior = pu.Gaussian(np.zeros(4), np.eye(4)) if shared else pu.Gaussian(
+        np.zeros((runs, 4)), np.broadcast_to(np.eye(4), (runs, 4, 4)).copy()
+    )
+    _threads(threads)
+    pu.run(filt, zs[:2], prior, keep_cov=False)  # compile / warm up
+    rate = runs * steps / _time(lambda: pu.run(filt, zs, prior, keep_cov=False))
+    _threads(2)
+    return rate
 
 
-def filterpy_rate(runs: int, steps: int) -> float | None:
+def filterpy_rate(kind: str, runs: int, steps: int) -> float | None:
     """Filter-steps per second for FilterPy, one run at a time (None if not installed)."""
     try:
-        from filterpy.kalman import KalmanFilter
+        from filterpy.kalman import KalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
     except ImportError:
         return None
-    motion, meas, zs = _work(runs, steps)
+    if kind == "kf":
+        motion, meas, zs = kf_work(runs, steps)
+
+        def go():
+            for i in range(runs):
+                kf = KalmanFilter(dim_x=4, dim_z=2)
+                kf.F = np.array(motion.transition_matrix())
+                kf.Q = np.array(motion.cov())
+                kf.H = np.array(meas.matrix())
+                kf.R = np.array(meas.cov())
+                kf.x = np.zeros((4, 1))
+                kf.P = np.eye(4)
+                for k in range(steps):
+                    kf.predict()
+                    kf.update(zs[k, i].reshape(2, 1))
+
+    else:
+        motion, meas, zs = ukf_work(runs, steps)
+        F = np.array(motion.transition_matrix())
+
+        def fx(x, dt):
+            return F @ x
+
+        def hx(x):
+            return meas.h(x)
+
+        def residual(a, b):
+            return meas.residual(a, b)
+
+        def go():
+            for i in range(runs):
+                pts = MerweScaledSigmaPoints(4, alpha=1.0, beta=2.0, kappa=0.0)
+                ukf = UnscentedKalmanFilter(dim_x=4, dim_z=2, dt=1.0, fx=fx, hx=hx, points=pts, residual_z=residual)
+                ukf.Q = np.array(motion.cov())
+                ukf.R = np.array(meas.cov())
+                ukf.x = np.zeros(4)
+                ukf.P = np.eye(4)
+                for k in range(steps):
+                    ukf.predict()
+                    ukf.update(zs[k, i])
+
+    return runs * steps / _time(go, 1)
+
+
+def simdkalman_rate(runs: int, steps: int) -> float | None:
+    """Filter-steps per second for simdkalman (batched over runs; None if not installed)."""
+    try:
+        import simdkalman
+    except ImportError:
+        return None
+    motion, meas, zs = kf_work(runs, steps)
+    kf = simdkalman.KalmanFilter(
+        state_transition=np.array(motion.transition_matrix()),
+        process_noise=np.array(motion.cov()),
+        observation_model=np.array(meas.matrix()),
+        observation_noise=np.array(meas.cov()),
+    )
+    data = np.ascontiguousarray(np.moveaxis(zs, 0, 1))  # (runs, steps, 2)
 
     def go():
-        for i in range(runs):
-            kf = KalmanFilter(dim_x=4, dim_z=2)
-            kf.F = np.array(motion.transition_matrix())
-            kf.Q = np.array(motion.cov())
-            kf.H = np.array(meas.matrix())
-            kf.R = np.array(meas.cov())
-            kf.x = np.zeros((4, 1))
-            kf.P = np.eye(4)
-            for k in range(steps):
-                kf.predict()
-                kf.update(zs[k, i].reshape(2, 1))
+        kf.compute(data, 0, initial_value=np.zeros(4), initial_covariance=np.eye(4), filtered=True, smoothed=False)
 
     return runs * steps / _time(go)
 
 
-def main(quick: bool = False) -> list[dict]:
-    """Measure and print a markdown table; returns the rows."""
-    runs, steps = (200, 200) if quick else (1000, 1000)
-    fp_runs = 5 if quick else 20
-    rows = []
-    for kind, label in (("kf-shared", "pursuit KF (shared P)"), ("kf-per-run", "pursuit KF (per-run P)"), ("ukf", "pursuit UKF")):
-        rows.append({"implementation": label, "runs": runs, "steps": steps, "rate": pursuit_rate(kind, runs, steps)})
-    fp = filterpy_rate(fp_runs, steps)
-    if fp is not None:
-        rows.append({"implementation": "FilterPy KF (one run at a time)", "runs": fp_runs, "steps": steps, "rate": fp})
-    print("| implementation | runs x steps | M filter-steps/s | vs FilterPy |")
-    print("|---|---|---|---|")
+def stonesoup_rate(kind: str, runs: int, steps: int) -> float | None:
+    """Filter-steps per second for Stone Soup, one run at a time (None if not installed)."""
+    try:
+        from stonesoup.models.measurement.linear import LinearGaussian as SSLinear
+        from stonesoup.models.measurement.nonlinear import CartesianToBearingRange
+        from stonesoup.models.transition.linear import CombinedLinearGaussianTransitionModel, ConstantVelocity as SSCV
+        from stonesoup.predictor.kalman import KalmanPredictor, UnscentedKalmanPredictor
+        from stonesoup.types.detection import Detection
+        from stonesoup.types.hypothesis import SingleHypothesis
+        from stonesoup.types.state import GaussianState
+        from stonesoup.updater.kalman import KalmanUpdater, UnscentedKalmanUpdater
+    except ImportError:
+        return None
+    warnings.simplefilter("ignore")
+    trans = CombinedLinearGaussianTransitionModel([SSCV(0.01), SSCV(0.01)])
+    if kind == "kf":
+        _, _, zs = kf_work(runs, steps)
+        mm = SSLinear(ndim_state=4, mapping=(0, 2), noise_covar=np.eye(2))
+        predictor, updater = KalmanPredictor(trans), KalmanUpdater(mm)
+        zz = zs
+    else:
+        _, _, zs = ukf_work(runs, steps)
+        # Stone Soup orders the measurement (bearing, range); the same numbers, swapped
+        mm = CartesianToBearingRange(
+            ndim_state=4, mapping=(0, 2), noise_covar=np.diag([SIG_B**2, SIG_R**2]),
+            translation_offset=np.array([[SENSOR[0]], [SENSOR[1]]]),
+        )
+        predictor = UnscentedKalmanPredictor(trans, alpha=1.0, beta=2.0, kappa=0.0)
+        updater = UnscentedKalmanUpdater(mm, alpha=1.0, beta=2.0, kappa=0.0)
+        zz = zs[..., ::-1]
+    t0 = datetime(2024, 1, 1)
+
+    def go():
+        for i in range(runs):
+            prior = GaussianState(np.zeros((4, 1)), np.eye(4), timestamp=t0)
+            for k in range(steps):
+                ts = t0 + timedelta(seconds=k + 1)
+                pred = predictor.predict(prior, timestamp=ts)
+                det = Detection(zz[k, i].reshape(2, 1), timestamp=ts, measurement_model=mm)
+                prior = updater.update(SingleHypothesis(pred, det))
+
+    return runs * steps / _time(go, 1)
+
+
+def _row(rows, label, runs, steps, rate, note=""):
+    rows.append({"implementation": label, "runs": runs, "steps": steps, "rate": rate, "note": note})
+
+
+def _table(title, rows, ref_label):
+    ref = next((r["rate"] for r in rows if r["implementation"] == ref_label and r["rate"]), None)
+    print(f"**{title}**\n")
+    print(f"| implementation | runs x steps measured | M filter-steps/s | vs {ref_label} | note |")
+    print("|---|---|---|---|---|")
     for r in rows:
-        ratio = f"{r['rate'] / fp:.1f}x" if fp else "n/a (filterpy not installed)"
-        r["vs_filterpy"] = r["rate"] / fp if fp else None
-        print(f"| {r['implementation']} | {r['runs']} x {r['steps']} | {r['rate'] / 1e6:.3f} | {ratio} |")
-    return rows
+        if r["rate"] is None:
+            print(f"| {r['implementation']} | | | | not installed |")
+            continue
+        ratio = f"{r['rate'] / ref:.2f}x" if ref else "n/a"
+        print(f"| {r['implementation']} | {r['runs']} x {r['steps']} | {r['rate'] / 1e6:.3f} | {ratio} | {r['note']} |")
+    print()
+
+
+def main(quick: bool = False) -> dict[str, list[dict]]:
+    """Measure and print two markdown tables (KF, UKF); returns the rows."""
+    try:
+        import numba  # noqa: F401
+
+        has_numba = True
+    except ImportError:
+        has_numba = False
+    runs, steps = (200, 100) if quick else (1000, 1000)
+    few = 3 if quick else 10
+    kf: list[dict] = []
+    _row(kf, "pursuit KF numpy (shared P)", runs, steps, pursuit_rate("kf", runs, steps), "Riccati once for the batch")
+    _row(kf, "pursuit KF numpy (per-run P)", runs, steps, pursuit_rate("kf", runs, steps, shared=False))
+    if has_numba:
+        for th in (1, 2):
+            _row(kf, f"pursuit KF numba, {th} thread{'s' if th > 1 else ''}", runs, steps,
+                 pursuit_rate("kf", runs, steps, "numba", threads=th), "per-run P, runs across SIMD lanes")
+    _row(kf, "simdkalman", runs, steps, simdkalman_rate(runs, steps), "batched over runs")
+    _row(kf, "FilterPy KalmanFilter", few, steps, filterpy_rate("kf", few, steps), f"one run at a time; {few} runs")
+    ss_runs = 1 if quick else 2
+    _row(kf, "Stone Soup KalmanPredictor/Updater", ss_runs, steps if not quick else 50,
+         stonesoup_rate("kf", ss_runs, steps if not quick else 50), f"one run at a time; {ss_runs} runs")
+    _table("KF, 4-state CV, position measured (M = %d, T = %d)" % (runs, steps), kf, "FilterPy KalmanFilter")
+
+    u_runs, u_steps = (200, 50) if quick else (1000, 200)
+    ukf: list[dict] = []
+    _row(ukf, "pursuit UKF numpy", u_runs, u_steps, pursuit_rate("ukf", u_runs, u_steps))
+    if has_numba:
+        for th in (1, 2):
+            _row(ukf, f"pursuit UKF numba, {th} thread{'s' if th > 1 else ''}", u_runs, u_steps,
+                 pursuit_rate("ukf", u_runs, u_steps, "numba", threads=th))
+    _row(ukf, "FilterPy UnscentedKalmanFilter", few, u_steps, filterpy_rate("ukf", few, u_steps), f"one run at a time; {few} runs")
+    _row(ukf, "Stone Soup UnscentedKalmanPredictor/Updater", ss_runs, u_steps,
+         stonesoup_rate("ukf", ss_runs, u_steps), f"one run at a time; {ss_runs} runs")
+    _table("UKF, range-bearing sensor (M = %d, T = %d)" % (u_runs, u_steps), ukf, "FilterPy UnscentedKalmanFilter")
+    return {"kf": kf, "ukf": ukf}
 
 
 if __name__ == "__main__":

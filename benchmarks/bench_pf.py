@@ -1,4 +1,4 @@
-"""Particle-filter speed: pursuit's bootstrap PF against the `particles` library, ICS-PF cost, p1-wsn.
+"""Particle filters: pursuit (NumPy and numba) against the `particles` library, 2-D CV target, ICS-PF cost.
 
 Run from the repository root::
 
@@ -20,8 +20,13 @@ What is measured (wall clock, best of ``--repeat`` runs, one process):
   with the same model, N, T and resampling, and stores nothing;
 * ICS-PF (10 cuckoo iterations) time per step relative to the bootstrap PF,
   same M, N, T;
-* the whole ``p1-wsn`` experiment (100 runs, N = 200, 100 steps, seven
-  filters) end to end, with the filtering time of each filter.
+* bootstrap PF on a 2-D constant-velocity target ranged by three anchors
+  (M = 100, T = 100, N = 1000 and 10 000), NumPy against numba;
+* pursuit's numba rows use ``numba.set_num_threads(1)`` or ``(2)``.
+
+Stone Soup's particle filter is not measured: it filters one run at a time
+through Python objects per step, and at N = 1000 a single run of the UNGM
+work takes minutes on this machine kind.
 
 numpy and BLAS are used single-threaded only if the caller sets
 ``OMP_NUM_THREADS=1``; the PF code itself is single-threaded NumPy.
@@ -62,11 +67,26 @@ def _ungm_data(M: int, T: int, seed: int = 1):
     return sc, sim
 
 
-def bench_pursuit_pf(M: int, T: int, N: int, repeat: int) -> float:
-    """Seconds for pursuit's bootstrap PF on M UNGM runs of T steps."""
-    sc, sim = _ungm_data(M, T)
-    filt = pu.BootstrapParticleFilter(sc.motion, sc.measurement, particles=N)
-    return _best(lambda: pu.run(filt, sim.measurements, sim.prior, rng=run_streams(2, range(M), 1)), repeat)
+def _threads(n):
+    if n is not None:
+        import numba
+
+        numba.set_num_threads(n)
+
+
+def bench_pursuit_pf(M: int, T: int, N: int, repeat: int, backend: str = "numpy", threads=None, scenario=None) -> float:
+    """Seconds for pursuit's bootstrap PF on M runs of T steps (UNGM unless ``scenario``)."""
+    if scenario is None:
+        sc, sim = _ungm_data(M, T)
+    else:
+        sc = scenario
+        sim = sc.simulate(run_streams(1, range(M), 0), M)
+    filt = pu.BootstrapParticleFilter(sc.motion, sc.measurement, particles=N, backend=backend)
+    _threads(threads)
+    pu.run(filt, sim.measurements[:2], sim.prior, rng=run_streams(2, range(M), 1))  # compile / warm up
+    t = _best(lambda: pu.run(filt, sim.measurements, sim.prior, rng=run_streams(2, range(M), 1)), repeat)
+    _threads(2)
+    return t
 
 
 def bench_particles_pf(M: int, T: int, N: int, repeat: int) -> float | None:
@@ -139,51 +159,68 @@ def main(quick: bool = False, repeat: int = 2) -> dict[str, Any]:
     """Run the benchmarks, print a markdown table, return the numbers.
 
     ``quick`` uses small sizes (a smoke test); ``repeat``: best of this many
-    timings of pursuit (the peer is timed once: it takes much longer).
+    timings of pursuit (the peer is timed once on fewer runs: it takes much
+    longer, and its cost per run does not depend on the number of runs).
     """
-    args = argparse.Namespace(quick=quick, repeat=repeat)
-    M, T = (20, 20) if args.quick else (100, 100)
-    sizes = (1000,) if args.quick else (1000, 10000)
-    wsn_runs = 5 if args.quick else 100
+    try:
+        import numba  # noqa: F401
+
+        has_numba = True
+    except ImportError:
+        has_numba = False
+    M, T = (10, 20) if quick else (100, 100)
+    sizes = (1000,) if quick else (1000, 10000)
+    peer_runs = 2 if quick else 10
     rows: list[tuple[str, str, str]] = []
     numbers: dict[str, Any] = {"machine": machine(), "M": M, "T": T}
 
+    def add(label, key, secs, work, ref=None, note=""):
+        rate = work / secs
+        numbers[key] = rate
+        ratio = f"{rate / ref:.1f}x" if ref else ""
+        rows.append((label, f"{rate / 1e6:.1f}", ratio, note))
+        return rate
+
     for N in sizes:
         work = M * T * N
-        t_ours = bench_pursuit_pf(M, T, N, args.repeat)
-        rate = work / t_ours
-        numbers[f"pursuit_pf_N{N}"] = rate
-        rows.append((f"bootstrap PF, UNGM, M={M}, T={T}, N={N}: pursuit", f"{rate / 1e6:.1f} M particle-steps/s", f"{t_ours:.2f} s"))
-        t_peer = bench_particles_pf(M, T, N, 1)
-        if t_peer is None:
-            rows.append(("same work: particles (Chopin)", "skipped (not installed)", ""))
+        t_peer = bench_particles_pf(peer_runs, T, N, 1)
+        ref = None
+        if t_peer is not None:
+            ref = peer_runs * T * N / t_peer
+        add(f"UNGM N={N}: pursuit numpy", f"numpy_N{N}", bench_pursuit_pf(M, T, N, repeat), work, ref, f"M={M}")
+        if has_numba:
+            for th in (1, 2):
+                add(f"UNGM N={N}: pursuit numba, {th} thread{'s' if th > 1 else ''}", f"numba{th}_N{N}",
+                    bench_pursuit_pf(M, T, N, repeat, "numba", th), work, ref, f"M={M}")
+        if ref is None:
+            rows.append((f"UNGM N={N}: particles (Chopin)", "not installed", "", ""))
         else:
-            prate = work / t_peer
-            numbers[f"particles_pf_N{N}"] = prate
-            rows.append(
-                ("same work: particles (Chopin)", f"{prate / 1e6:.1f} M particle-steps/s", f"{t_peer:.2f} s; pursuit {rate / prate:.1f}x faster")
-            )
+            numbers[f"particles_N{N}"] = ref
+            rows.append((f"UNGM N={N}: particles (Chopin)", f"{ref / 1e6:.1f}", "1.0x", f"one run at a time; {peer_runs} runs"))
 
-    N_ics = 100 if args.quick else 1000
-    T_ics = 10 if args.quick else 20
+    from pursuit.scenarios.wsn import WSNRange
+
+    cv = WSNRange(anchors=[[0.0, 0.0], [100.0, 0.0], [0.0, 100.0]], sigma=2.0, steps=T)
+    for N in sizes:
+        work = M * T * N
+        base = add(f"2-D CV, 3 range anchors, N={N}: pursuit numpy", f"cv_numpy_N{N}", bench_pursuit_pf(M, T, N, repeat, scenario=cv), work)
+        if has_numba:
+            for th in (1, 2):
+                add(f"2-D CV, 3 range anchors, N={N}: pursuit numba, {th} thread{'s' if th > 1 else ''}", f"cv_numba{th}_N{N}",
+                    bench_pursuit_pf(M, T, N, repeat, "numba", th, scenario=cv), work, base, "ratio vs pursuit numpy")
+
+    N_ics = 100 if quick else 1000
+    T_ics = 10 if quick else 20
     per_ics, per_pf = bench_ics_ratio(M, T_ics, N_ics, 1)
     numbers["ics_over_pf"] = per_ics / per_pf
-    rows.append(
-        (f"ICS-PF (10 iterations) vs bootstrap PF, UNGM, M={M}, N={N_ics}", f"{per_ics / per_pf:.1f}x the time per step", f"{per_ics * 1e3:.1f} ms vs {per_pf * 1e3:.2f} ms per step")
-    )
-
-    total, per_filter = bench_p1_wsn(wsn_runs)
-    numbers["p1_wsn_total_s"] = total
-    numbers["p1_wsn_filters_s"] = per_filter
-    rows.append((f"p1-wsn experiment end to end ({wsn_runs} runs, N=200, 100 steps)", f"{total:.1f} s", ""))
-    for name, sec in per_filter.items():
-        rows.append((f"  filtering time: {name}", f"{sec:.2f} s", ""))
+    rows.append((f"ICS-PF (10 iterations) vs bootstrap PF, UNGM, M={M}, N={N_ics}, numpy", f"{per_ics / per_pf:.1f}x the time per step", "",
+                 f"{per_ics * 1e3:.1f} ms vs {per_pf * 1e3:.2f} ms per step"))
 
     print(f"Machine: {numbers['machine']}\n")
-    print("| benchmark | result | detail |")
-    print("|---|---|---|")
+    print("| work: implementation | M particle-steps/s | vs particles | note |")
+    print("|---|---|---|---|")
     for r in rows:
-        print(f"| {r[0]} | {r[1]} | {r[2]} |")
+        print(f"| {r[0]} | {r[1]} | {r[2]} | {r[3]} |")
     return numbers
 
 
