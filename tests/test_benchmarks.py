@@ -15,4 +15,5 @@ def test_benchmark_runner_quick_mode():
         timeout=300,
     )
     assert proc.returncode == 0, proc.stderr
-    assert "pursuit KF (shared P)" in proc.stdout
+    assert "pursuit KF numpy (shared P)" in proc.stdout
+    assert "pursuit UKF numpy" in proc.stdout
