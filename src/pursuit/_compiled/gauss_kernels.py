@@ -129,7 +129,7 @@ def _chol(P, L, ok):
         Ljj = L[j, j]
         for c in range(B):
             good = d[c] > 0.0 and d[c] < np.inf
-            ok[c] = ok[c] and good
+            ok[c] &= good
             Ljj[c] = math.sqrt(d[c]) if good else 1.0
         for i in range(j + 1, n):
             Lij = L[i, j]
@@ -149,6 +149,29 @@ def _spd_inv(S, Si, ok, logdet):
     """Si = S⁻¹ and log det S for S (m, m, B) through Cholesky."""
     m = S.shape[0]
     B = S.shape[2]
+    if m == 1:
+        for c in range(B):
+            a = S[0, 0, c]
+            good = a > 0.0 and a < np.inf
+            ok[c] &= good
+            Si[0, 0, c] = 1.0 / a
+            logdet[c] = math.log(a) if good else 0.0
+        return
+    if m == 2:  # closed form, as pursuit._linalg.inv_spd; positive definite iff a > 0 and det > 0
+        for c in range(B):
+            a = S[0, 0, c]
+            b = S[0, 1, c]
+            d = S[1, 1, c]
+            det = a * d - b * b
+            good = a > 0.0 and det > 0.0 and det < np.inf
+            ok[c] &= good
+            inv = 1.0 / det
+            Si[0, 0, c] = d * inv
+            Si[0, 1, c] = -b * inv
+            Si[1, 0, c] = -b * inv
+            Si[1, 1, c] = a * inv
+            logdet[c] = math.log(det) if good else 0.0
+        return
     L = np.empty((m, m, B))
     _chol(S, L, ok)
     logdet[:] = 0.0
