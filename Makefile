@@ -35,7 +35,7 @@ BENCH_VENV ?= .bench-venv
 
 $(BENCH_VENV)/.installed: pyproject.toml benchmarks/requirements-peers.txt
 	test -x $(BENCH_VENV)/bin/python || $(PYTHON) -m venv $(BENCH_VENV)
-	$(BENCH_VENV)/bin/python -m pip install --quiet -e . -r benchmarks/requirements-peers.txt
+	$(BENCH_VENV)/bin/python -m pip install --quiet -e '.[fast]' -r benchmarks/requirements-peers.txt
 	@touch $@
 
 bench: $(BENCH_VENV)/.installed
