@@ -174,7 +174,8 @@ def stonesoup_rate(kind: str, runs: int, steps: int) -> float | None:
     try:
         from stonesoup.models.measurement.linear import LinearGaussian as SSLinear
         from stonesoup.models.measurement.nonlinear import CartesianToBearingRange
-        from stonesoup.models.transition.linear import CombinedLinearGaussianTransitionModel, ConstantVelocity as SSCV
+        from stonesoup.models.transition.linear import CombinedLinearGaussianTransitionModel
+        from stonesoup.models.transition.linear import ConstantVelocity as SSCV
         from stonesoup.predictor.kalman import KalmanPredictor, UnscentedKalmanPredictor
         from stonesoup.types.detection import Detection
         from stonesoup.types.hypothesis import SingleHypothesis

@@ -10,7 +10,7 @@ peers (``benchmarks/requirements-peers.txt``) are optional: install them in a
 separate environment (see that file); a peer that is not importable is
 reported as skipped.
 
-What is measured (wall clock, best of ``--repeat`` runs, one process):
+What is measured (wall clock, median of ``--repeat`` runs, one process):
 
 * bootstrap PF on UNGM (Gordon et al. 1993; paper P1 eq. 15-16, Q = R = 1):
   M runs of T steps with N particles, systematic resampling at every step,
@@ -21,7 +21,10 @@ What is measured (wall clock, best of ``--repeat`` runs, one process):
 * ICS-PF (10 cuckoo iterations) time per step relative to the bootstrap PF,
   same M, N, T;
 * bootstrap PF on a 2-D constant-velocity target ranged by three anchors
-  (M = 100, T = 100, N = 1000 and 10 000), NumPy against numba;
+  (M = 100, T = 100, N = 1000 and 10 000), NumPy and numba against
+  ``particles`` with the same F, Q, anchors, noise, priors and measurements;
+* the whole ``p1-wsn`` experiment (7 filters, 100 runs, N = 200, 100 steps)
+  end to end, NumPy and with ``--compute-backend numba``;
 * pursuit's numba rows use ``numba.set_num_threads(1)`` or ``(2)``.
 
 Stone Soup's particle filter is not measured: it filters one run at a time
@@ -36,8 +39,10 @@ from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import sys
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -53,12 +58,13 @@ from pursuit.scenarios.ungm import UNGM  # noqa: E402
 
 
 def _best(fn, repeat: int) -> float:
-    best = float("inf")
+    """Median wall time of ``repeat`` calls of ``fn``."""
+    times = []
     for _ in range(repeat):
         t0 = time.perf_counter()
         fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
 
 
 def _ungm_data(M: int, T: int, seed: int = 1):
@@ -123,6 +129,62 @@ def bench_particles_pf(M: int, T: int, N: int, repeat: int) -> float | None:
     return _best(go, repeat)
 
 
+def bench_particles_cv(scenario, M: int, T: int, N: int, repeat: int) -> float | None:
+    """Seconds for the `particles` library on the 2-D CV range-only work, or None if it is not installed.
+
+    Same motion (F and the noise factor G of the scenario's constant-velocity model), the same
+    three range anchors and noise, each run's own prior mean and the same
+    measurements as pursuit's rows; systematic resampling at every step.
+    """
+    try:
+        import particles
+        from particles import distributions as dists
+        from particles import state_space_models as ssm
+    except ImportError:
+        return None
+    sim = scenario.simulate(run_streams(1, range(M), 0), M)
+    F = np.asarray(scenario.motion.transition_matrix())
+    G = np.asarray(scenario.motion.noise_factor())  # Q = G Gᵀ is singular (discrete white-noise acceleration)
+    anchors = np.asarray(scenario.anchors)
+    R = scenario.sigma**2 * np.eye(len(anchors))
+    P0 = np.asarray(sim.prior.cov)
+
+    class LinearGaussianMove(dists.ProbDist):
+        """x = loc + G ξ, ξ ~ N(0, I): what the bootstrap filter draws (MvNormal needs a full-rank Q)."""
+
+        dim = 4
+
+        def __init__(self, loc):
+            self.loc = loc
+
+        def rvs(self, size=None):
+            return self.loc + np.random.standard_normal((self.loc.shape[0], G.shape[1])) @ G.T
+
+    class RangeCV(ssm.StateSpaceModel):
+        default_params = {"mu0": np.zeros(4)}
+
+        def PX0(self):
+            return dists.MvNormal(loc=self.mu0, cov=P0)
+
+        def PX(self, t, xp):
+            return LinearGaussianMove(xp @ F.T)
+
+        def PY(self, t, xp, x):
+            pos = x[:, [0, 2]]
+            ranges = np.sqrt(((pos[:, None, :] - anchors[None, :, :]) ** 2).sum(-1))
+            return dists.MvNormal(loc=ranges, cov=R)
+
+    models = [RangeCV(mu0=np.asarray(sim.prior.mean)[i]) for i in range(M)]
+    data = [sim.measurements[:, i, :] for i in range(M)]
+
+    def go():
+        for model, y in zip(models, data):
+            fk = ssm.Bootstrap(ssm=model, data=y)
+            particles.SMC(fk=fk, N=N, resampling="systematic", ESSrmin=1.0, store_history=False, collect=None).run()
+
+    return _best(go, repeat)
+
+
 def bench_ics_ratio(M: int, T: int, N: int, repeat: int) -> tuple[float, float]:
     """Seconds per step of ICS-PF and of the bootstrap PF on UNGM."""
     sc, sim = _ungm_data(M, T)
@@ -133,14 +195,27 @@ def bench_ics_ratio(M: int, T: int, N: int, repeat: int) -> tuple[float, float]:
     return t_ics / T, t_pf / T
 
 
-def bench_p1_wsn(runs: int) -> tuple[float, dict[str, float]]:
-    """Seconds for the whole p1-wsn experiment, and each filter's filtering time."""
+def bench_p1_wsn(runs: int, backend: str = "numpy") -> tuple[float, dict[str, float]]:
+    """Seconds for the whole p1-wsn experiment, and each filter's filtering time.
+
+    ``backend`` is the default compute backend of the experiment's filters
+    (what ``--compute-backend`` sets); the numba kernels are compiled by a
+    short warm-up run first, so compile time is not counted.
+    """
+    from pursuit.compute import CompiledBackendWarning, set_default_backend
     from pursuit.experiment import find_experiment, load_experiment
 
-    exp = load_experiment(find_experiment(str(ROOT / "experiments" / "p1-wsn.toml")))
-    t0 = time.perf_counter()
-    out = exp.run(runs=runs)
-    total = time.perf_counter() - t0
+    set_default_backend(backend)
+    try:
+        warnings.simplefilter("ignore", CompiledBackendWarning)  # the UPF has no compiled path: expected
+        exp = load_experiment(find_experiment(str(ROOT / "experiments" / "p1-wsn.toml")))
+        if backend != "numpy":
+            exp.run(runs=2)
+        t0 = time.perf_counter()
+        out = exp.run(runs=runs)
+        total = time.perf_counter() - t0
+    finally:
+        set_default_backend(None)
     summary = out.tables[0]
     i_f, i_t = summary.columns.index("filter"), summary.columns.index("wall_time_s")
     return total, {row[i_f]: float(row[i_t]) for row in summary.rows}
@@ -155,10 +230,10 @@ def machine() -> str:
     return f"{describe()}; load average {load:.2f} at start"
 
 
-def main(quick: bool = False, repeat: int = 2) -> dict[str, Any]:
+def main(quick: bool = False, repeat: int = 3) -> dict[str, Any]:
     """Run the benchmarks, print a markdown table, return the numbers.
 
-    ``quick`` uses small sizes (a smoke test); ``repeat``: best of this many
+    ``quick`` uses small sizes (a smoke test); ``repeat``: median of this many
     timings of pursuit (the peer is timed once on fewer runs: it takes much
     longer, and its cost per run does not depend on the number of runs).
     """
@@ -203,11 +278,18 @@ def main(quick: bool = False, repeat: int = 2) -> dict[str, Any]:
     cv = WSNRange(anchors=[[0.0, 0.0], [100.0, 0.0], [0.0, 100.0]], sigma=2.0, steps=T)
     for N in sizes:
         work = M * T * N
-        base = add(f"2-D CV, 3 range anchors, N={N}: pursuit numpy", f"cv_numpy_N{N}", bench_pursuit_pf(M, T, N, repeat, scenario=cv), work)
+        t_peer = bench_particles_cv(cv, peer_runs, T, N, 1)
+        ref = None if t_peer is None else peer_runs * T * N / t_peer
+        add(f"2-D CV, 3 range anchors, N={N}: pursuit numpy", f"cv_numpy_N{N}", bench_pursuit_pf(M, T, N, repeat, scenario=cv), work, ref, f"M={M}")
         if has_numba:
             for th in (1, 2):
                 add(f"2-D CV, 3 range anchors, N={N}: pursuit numba, {th} thread{'s' if th > 1 else ''}", f"cv_numba{th}_N{N}",
-                    bench_pursuit_pf(M, T, N, repeat, "numba", th, scenario=cv), work, base, "ratio vs pursuit numpy")
+                    bench_pursuit_pf(M, T, N, repeat, "numba", th, scenario=cv), work, ref, f"M={M}")
+        if ref is None:
+            rows.append((f"2-D CV, 3 range anchors, N={N}: particles (Chopin)", "not installed", "", ""))
+        else:
+            numbers[f"cv_particles_N{N}"] = ref
+            rows.append((f"2-D CV, 3 range anchors, N={N}: particles (Chopin)", f"{ref / 1e6:.1f}", "1.0x", f"one run at a time; {peer_runs} runs"))
 
     N_ics = 100 if quick else 1000
     T_ics = 10 if quick else 20
@@ -215,6 +297,14 @@ def main(quick: bool = False, repeat: int = 2) -> dict[str, Any]:
     numbers["ics_over_pf"] = per_ics / per_pf
     rows.append((f"ICS-PF (10 iterations) vs bootstrap PF, UNGM, M={M}, N={N_ics}, numpy", f"{per_ics / per_pf:.1f}x the time per step", "",
                  f"{per_ics * 1e3:.1f} ms vs {per_pf * 1e3:.2f} ms per step"))
+
+    wsn_runs = 4 if quick else 100
+    backends = ("numpy", "numba") if has_numba else ("numpy",)
+    for backend in backends:
+        total, per_filter = bench_p1_wsn(wsn_runs, backend)
+        numbers[f"p1_wsn_{backend}"] = {"total": total, **per_filter}
+        parts = ", ".join(f"{name} {secs:.1f} s" for name, secs in per_filter.items())
+        rows.append((f"p1-wsn end to end ({wsn_runs} runs, 7 filters, N = 200), {backend}", f"{total:.1f} s wall", "", parts))
 
     print(f"Machine: {numbers['machine']}\n")
     print("| work: implementation | M particle-steps/s | vs particles | note |")
@@ -227,6 +317,6 @@ def main(quick: bool = False, repeat: int = 2) -> dict[str, Any]:
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
-    ap.add_argument("--repeat", type=int, default=2, help="best of this many timings")
+    ap.add_argument("--repeat", type=int, default=3, help="median of this many timings")
     cli = ap.parse_args()
     main(quick=cli.quick, repeat=cli.repeat)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._validation import as_covariance, as_float_array
-from .rng import RunStreams, as_rng, RNGLike
+from .rng import RNGLike, RunStreams, as_rng
 
 __all__ = ["Gaussian"]
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 from typing import Sequence
 
 import numpy as np
+
 from ._chi2 import chi2_ppf
 
 __all__ = [

@@ -8,7 +8,6 @@ equality, NaN handling, determinism and the meaning of its NIS.
 from __future__ import annotations
 
 import importlib.util
-
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -20,11 +19,11 @@ from pursuit.filters import (
     ModifiedSingerFilter,
     kinematic_map,
 )
-from pursuit.models import ConstantVelocity, Singer
-from pursuit.scenarios import LinearCV, ManeuveringTarget, WSNRange
 from pursuit.filters.cuckoo import CSPF, ICSPF, CuckooSearch
 from pursuit.filters.particle import BootstrapParticleFilter
 from pursuit.filters.upf import PartialUPF
+from pursuit.models import ConstantVelocity, Singer
+from pursuit.scenarios import LinearCV, ManeuveringTarget, WSNRange
 
 
 @dataclass(frozen=True)

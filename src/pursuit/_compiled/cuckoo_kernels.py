@@ -23,7 +23,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .common import LOG_2PI, h_one, n_uniforms, resample_counts, copy_by_counts, wrap
+from .common import LOG_2PI, copy_by_counts, h_one, n_uniforms, resample_counts, wrap
 from .pf_kernels import exp_shifted_run, measure_run, moments_run, predictive_run
 
 _EPS = 1e-12

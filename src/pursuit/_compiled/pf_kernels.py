@@ -306,7 +306,6 @@ def _fast_run(r, X, logw, logN, noise, g, per_run, mk, F, G, par, hk, A, idx, sc
         zr[j] = zvec[j]
     zhat = np.zeros(m)
     mx = -np.inf
-    nan_seen = False
     # pass 1
     if mk == UNGM:
         pa, pb, forcing, sq = par[0], par[1], par[2], par[3]
@@ -341,7 +340,6 @@ def _fast_run(r, X, logw, logN, noise, g, per_run, mk, F, G, par, hk, A, idx, sc
                 zhat[j] += w * Zp[i, j]
         if math.isnan(v):
             v = -np.inf
-            nan_seen = True
         a[i] = v
         if v > mx:
             mx = v

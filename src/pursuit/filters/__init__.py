@@ -1,6 +1,7 @@
 """Filters: each has ``init(prior, batch, rng)`` and ``step(state, z, k) -> (state, info)``."""
 
 from .cs import AdaptiveCSFilter, CurrentStatisticalFilter, ModifiedSingerFilter
+from .cuckoo import CSPF, ICSPF, CuckooParticleFilter, CuckooSearch
 from .fading import Constant, Fade, FadingContext, FadingStrategy, NoFading
 from .fading_adaptive import ExponentiallyWeighted, StrongTracking
 from .gaussian import (
@@ -10,10 +11,9 @@ from .gaussian import (
     KalmanFilter,
     UnscentedKalmanFilter,
 )
-from .cuckoo import CSPF, ICSPF, CuckooParticleFilter, CuckooSearch
-from .particle import SIR, BootstrapParticleFilter, ParticleState
-from .imm import InteractingMultipleModel, StateMap, kinematic_map
 from .ifmkf import Improved
+from .imm import InteractingMultipleModel, StateMap, kinematic_map
+from .particle import SIR, BootstrapParticleFilter, ParticleState
 from .smoother import SmoothedTrack, rts_smooth
 from .upf import PartialUPF
 

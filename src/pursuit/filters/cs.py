@@ -35,7 +35,6 @@ from typing import Any
 import numpy as np
 
 from .._chi2 import chi2_isf
-
 from .._validation import in_range, nonnegative, positive
 from ..gaussian import Gaussian
 from ..models.maneuver import (

@@ -1,8 +1,8 @@
 """Motion and measurement models, vectorised over any leading batch axes."""
 
-from .measurement import LinearGaussian, RangeBearing, RangeSensors, TimeOfArrival, gaussian_loglik, wrap_angle
-from .maneuver import ConstantTurn, CoordinatedTurn, CurrentStatistical, Jerk, Singer
 from .linear_motion import LinearMotion
+from .maneuver import ConstantTurn, CoordinatedTurn, CurrentStatistical, Jerk, Singer
+from .measurement import LinearGaussian, RangeBearing, RangeSensors, TimeOfArrival, gaussian_loglik, wrap_angle
 from .motion import ConstantAcceleration, ConstantVelocity
 from .toa import PositionFix, l_array, toa_position, trilaterate, trilateration_jacobian
 

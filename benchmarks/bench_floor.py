@@ -1,0 +1,155 @@
+"""Where the compiled backend's time goes: cost floors of one particle step and one Kalman step.
+
+Not a comparison with peers: this measures, in the same run, the pieces the
+compiled filters cannot avoid, to explain the distance to the speed targets
+of issue 8 (PF >= 60 M particle-steps/s per core, KF >= 10 M steps/s per
+core).
+
+* **Particle step floor.** Every particle of a bootstrap PF needs one
+  standard normal drawn from its run's NumPy ``Generator`` (pursuit keeps
+  NumPy's streams so that both backends give the same estimates) and one
+  ``exp`` for its weight.  Measured one million at a time inside numba
+  (one thread), beside NumPy's own vectorised draw; the UNGM propagation
+  arithmetic for scale.  The sum of draw and ``exp`` bounds the compiled
+  bootstrap PF's rate from above.
+* **Kalman step split.** The compiled KF (4-state CV, position measured,
+  1000 runs, 1 thread): the compiled step kernel called directly on the
+  lane-major arrays, against the whole ``pursuit.run`` (which adds the
+  per-step Python call, the step info arrays and copying every step's
+  results into the track).
+
+Run::
+
+    .bench-venv/bin/python benchmarks/run.py --only floor
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+import time
+
+import numpy as np
+
+import pursuit as pu
+
+REPEATS = 5
+
+
+def _median_time(fn, repeats: int = REPEATS) -> float:
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def particle_floor(n: int) -> list[tuple[str, float]]:
+    """Nanoseconds per element for the unavoidable pieces of a particle step (numba, one thread)."""
+    import numba
+
+    @numba.njit
+    def draw(g, out):
+        for i in range(out.shape[0]):
+            out[i] = g.standard_normal()
+
+    @numba.njit
+    def expo(a, out):
+        s = 0.0
+        for i in range(a.shape[0]):
+            v = math.exp(a[i])
+            out[i] = v
+            s += v
+        return s
+
+    @numba.njit
+    def ungm(x, noise, out):
+        for i in range(x.shape[0]):
+            xi = x[i]
+            out[i] = noise[i] * 3.1622776601683795 + (xi * (0.5 + 25.0 / (xi * xi + 1.0)) + 8.0)
+
+    g = np.random.default_rng(0)
+    out = np.empty(n)
+    a = -5.0 * g.random(n)
+    draw(g, out), expo(a, out), ungm(a, a, out)  # compile
+    rows = [
+        ("Generator.standard_normal() in numba, per draw", _median_time(lambda: draw(g, out))),
+        ("NumPy Generator.standard_normal(out=...), per draw", _median_time(lambda: g.standard_normal(out=out))),
+        ("math.exp in numba, per value", _median_time(lambda: expo(a, out))),
+        ("UNGM propagation arithmetic in numba, per particle", _median_time(lambda: ungm(a, a, out))),
+    ]
+    return [(label, t / n * 1e9) for label, t in rows]
+
+
+def kalman_split(runs: int, steps: int) -> tuple[float, float]:
+    """(kernel-only, whole-run) filter-steps per second of the compiled KF on one thread."""
+    import numba
+
+    from pursuit._compiled import gauss_kernels as GK
+    from pursuit._compiled.particle import measurement_args
+    from pursuit.models import ConstantVelocity, LinearGaussian
+
+    numba.set_num_threads(1)
+    motion = ConstantVelocity(ndim=2, dt=1.0, q=0.01, noise="continuous")
+    meas = LinearGaussian.position(4, motion.position_indices, 1.0)
+    zs = np.random.default_rng(0).standard_normal((steps, runs, 2)) * 3.0
+    filt = pu.KalmanFilter(motion, meas, backend="numba")
+    prior = pu.Gaussian(np.zeros(4), np.eye(4))
+    pu.run(filt, zs[:2], prior, keep_cov=False)  # compile
+    whole = runs * steps / _median_time(lambda: pu.run(filt, zs, prior, keep_cov=False), 3)
+
+    ms, hs = filt._specs  # noqa: SLF001 (measurement of the internals)
+    n, m = 4, 2
+    F, _, _ = ms.arrays(1, None)
+    Q = np.ascontiguousarray(ms.cov(1, None))
+    zl = np.ascontiguousarray(np.moveaxis(zs, 2, 1))  # (T, m, M) lane-major
+    valid = ~np.isnan(zl)
+    outs = (np.empty((n, runs)), np.empty((n, n, runs)), np.empty((n, runs)), np.empty((n, n, runs)),
+            np.empty((n, n, runs)), np.empty((m, runs)), np.empty((m, m, runs)), np.empty(runs),
+            np.empty(runs, dtype=np.int64), np.empty(runs), np.ones(runs, dtype=np.bool_))
+    margs = measurement_args(hs)
+
+    def kernel_only():
+        x, P = np.zeros((n, runs)), np.ascontiguousarray(np.broadcast_to(np.eye(n)[..., None], (n, n, runs)))
+        for k in range(steps):
+            GK.ekf_step_serial(x, P, zl[k], valid[k], F, Q, 1.0, *margs, *outs)
+            x, P = outs[0].copy(), outs[1].copy()
+
+    kernel = runs * steps / _median_time(kernel_only, 3)
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    return kernel, whole
+
+
+def main(quick: bool = False) -> dict:
+    """Print two markdown tables; returns the numbers."""
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        print("numba is not installed: nothing to measure.\n")
+        return {}
+    floor = particle_floor(100_000 if quick else 1_000_000)
+    print("**Per-particle pieces (numba, one thread)**\n")
+    print("| piece | ns per element |")
+    print("|---|---|")
+    for label, ns in floor:
+        print(f"| {label} | {ns:.2f} |")
+    bound = floor[0][1] + floor[2][1]
+    print(f"\nOne draw and one exp: {bound:.1f} ns per particle, so at most {1e3 / bound:.0f} M particle-steps/s "
+          "per core for any bootstrap PF that keeps NumPy's random streams, before propagation, likelihood, "
+          "moments and resampling.\n")
+    runs, steps = (200, 50) if quick else (1000, 300)
+    kernel, whole = kalman_split(runs, steps)
+    print(f"**Compiled KF, 4-state CV, position measured, {runs} runs x {steps} steps, one thread**\n")
+    print("| measured | M filter-steps/s |")
+    print("|---|---|")
+    print(f"| step kernel alone (lane-major arrays, no Python between steps) | {kernel / 1e6:.2f} |")
+    print(f"| `pursuit.run` (per-step call, step info, results copied into the track) | {whole / 1e6:.2f} |")
+    print()
+    return {"particle_floor_ns": floor, "kf_kernel": kernel, "kf_run": whole}
+
+
+if __name__ == "__main__":
+    import sys
+
+    main(quick="--quick" in sys.argv)
