@@ -26,10 +26,9 @@ Run::
 from __future__ import annotations
 
 import math
-import statistics
-import time
 
 import numpy as np
+from _timing import median_time  # benchmarks/ is on sys.path when a benchmark runs as a script
 
 import pursuit as pu
 
@@ -37,12 +36,7 @@ REPEATS = 5
 
 
 def _median_time(fn, repeats: int = REPEATS) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    return median_time(fn, repeats)
 
 
 def particle_floor(n: int) -> list[tuple[str, float]]:

@@ -24,12 +24,11 @@ Run::
 
 from __future__ import annotations
 
-import statistics
-import time
 import warnings
 from datetime import datetime, timedelta
 
 import numpy as np
+from _timing import median_time  # benchmarks/ is on sys.path when a benchmark runs as a script
 
 import pursuit as pu
 from pursuit.models import ConstantVelocity, LinearGaussian, RangeBearing
@@ -41,12 +40,7 @@ SIG_R, SIG_B = 1.0, 0.02
 
 def _time(fn, repeats: int = REPEATS) -> float:
     """Median wall time of ``fn()`` over ``repeats`` calls."""
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    return median_time(fn, repeats)
 
 
 def _motion():

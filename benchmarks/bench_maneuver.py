@@ -22,10 +22,8 @@ Run::
 
 from __future__ import annotations
 
-import statistics
-import time
-
 import numpy as np
+from _timing import median_time  # benchmarks/ is on sys.path when a benchmark runs as a script
 
 import pursuit as pu
 from pursuit.filters import AdaptiveCSFilter, CurrentStatisticalFilter, InteractingMultipleModel, ModifiedSingerFilter
@@ -38,12 +36,7 @@ SINGER_MODES = ((1 / 60, 5.0), (1 / 20, 20.0), (1 / 5, 60.0))
 
 
 def _time(fn, repeats: int = REPEATS) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    return median_time(fn, repeats)
 
 
 def _work(runs: int):

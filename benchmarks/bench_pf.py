@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import sys
 import time
 import warnings
@@ -52,6 +51,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT / "src") not in sys.path:
     sys.path.insert(0, str(ROOT / "src"))
 
+from _timing import median_time  # noqa: E402 (benchmarks/ is on sys.path when run as a script)
+
 import pursuit as pu  # noqa: E402
 from pursuit.rng import run_streams  # noqa: E402
 from pursuit.scenarios.ungm import UNGM  # noqa: E402
@@ -59,12 +60,7 @@ from pursuit.scenarios.ungm import UNGM  # noqa: E402
 
 def _best(fn, repeat: int) -> float:
     """Median wall time of ``repeat`` calls of ``fn``."""
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    return median_time(fn, repeat)
 
 
 def _ungm_data(M: int, T: int, seed: int = 1):

@@ -8,6 +8,10 @@ with the number of runs.  For contrast, full storage mode (every run's arrays
 kept) is measured in-process at both sizes.  Each configuration runs in a fresh
 Python process, so peak memories do not mix.
 
+Every configuration's processes run BLAS/OpenMP on one thread (as
+:class:`pursuit.engine.backends.LocalProcesses` gives its workers), so the
+in-process run uses one core and "2 workers" two.
+
 Reports runs per second, the speed-up over the in-process run of the same
 size, the peak resident memory (VmHWM) of the main process and of the largest
 worker, and whether the summary table is bit-identical to the in-process one.
@@ -30,6 +34,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+from pursuit.engine.backends import WORKER_THREAD_ENV
 
 ROOT = Path(__file__).resolve().parents[1]
 SEED = 20261122
@@ -84,7 +90,11 @@ def child(name: str, runs: int, workers: int, store: str, chunk: int) -> dict:
 
 def _measure(name: str, runs: int, workers: int, store: str, chunk: int) -> dict:
     cmd = [sys.executable, __file__, "--child", name, str(runs), str(workers), store, str(chunk)]
-    res = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, check=False)
+    # One thread of BLAS/OpenMP per process everywhere, as LocalProcesses gives its workers, so that
+    # "in-process" is one core and "2 workers" two: otherwise the in-process run spreads BLAS threads
+    # over both cores and the speed-up compares unlike things.
+    env = {**os.environ, **{v: "1" for v in WORKER_THREAD_ENV}}
+    res = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, check=False, env=env)
     if res.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed:\n{res.stderr[-2000:]}")
     return json.loads(res.stdout.strip().splitlines()[-1])

@@ -139,3 +139,26 @@ def test_progress_bar_draws_as_chunks_finish(pool, monkeypatch):
     shown = [float(p) for p in re.findall(r"(\d+\.\d)%", term.getvalue())]
     assert shown[0] == 0.0 and shown[-1] == 100.0
     assert shown == sorted(shown) and len({p for p in shown if 0 < p < 100}) >= 2  # it moved in between
+
+
+def _worker_thread_env(start, stop):
+    import os
+
+    from pursuit.engine.backends import WORKER_THREAD_ENV
+
+    return {name: os.environ.get(name) for name in WORKER_THREAD_ENV}
+
+
+def test_workers_compute_on_one_thread_each():
+    """Worker processes get one BLAS/OpenMP/numba thread each (values the user set are kept), and the
+    parent's environment is left as it was."""
+    import os
+
+    from pursuit.engine.backends import WORKER_THREAD_ENV
+
+    before = {name: os.environ.get(name) for name in WORKER_THREAD_ENV}
+    seen = []
+    with LocalProcesses(1) as backend:
+        backend.map_chunks(_worker_thread_env, [(0, 1)], lambda span, result: seen.append(result))
+    assert seen == [{name: before[name] or "1" for name in WORKER_THREAD_ENV}]
+    assert {name: os.environ.get(name) for name in WORKER_THREAD_ENV} == before

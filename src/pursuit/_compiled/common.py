@@ -11,13 +11,8 @@ import math
 import numpy as np
 from numba import njit
 
-# kinds, as in specs.py (module constants are frozen into the compiled code)
-LINEAR = 0
-UNGM = 1
-M_LINEAR = 0
-M_UNGM = 1
-M_RANGE = 2
-M_RANGE_BEARING = 3
+# model kinds are defined once, in specs.py (module constants are frozen into the compiled code)
+from .specs import LINEAR, M_LINEAR, M_RANGE, M_RANGE_BEARING, M_UNGM, UNGM  # noqa: F401 (re-exported to the kernels)
 
 R_SYSTEMATIC = 0
 R_STRATIFIED = 1
