@@ -54,6 +54,30 @@ def flat_batch(state_particles: np.ndarray) -> tuple[tuple[int, ...], int]:
     return batch, int(np.prod(batch, dtype=int))
 
 
+def _resample_with_shared_rng(rng, need: np.ndarray, rkind: int, N: int, logw_out: np.ndarray, Xout: np.ndarray) -> None:
+    """Resample the runs flagged in ``need`` with uniforms from the one shared Generator, in NumPy's order."""
+    if not need.any():
+        return
+    rows = np.flatnonzero(need)
+    U = np.zeros((need.size, K.n_uniforms(rkind, N)))
+    U[rows] = rng.random((rows.size, U.shape[1]))
+    K.pf_resample_parallel(logw_out, need, U, rkind, Xout)
+
+
+def _step_info(batch, m, innov, S, nis, dof, loglik, reset, ess, need) -> dict[str, np.ndarray]:
+    """The info keys every particle filter step reports, reshaped to the batch."""
+    return {
+        "innovation": innov.reshape(*batch, m),
+        "S": S.reshape(*batch, m, m),
+        "nis": nis.reshape(batch),
+        "dof": dof.reshape(batch),
+        "loglik": loglik.reshape(batch),
+        "weights_reset": reset.reshape(batch),
+        "ess": ess.reshape(batch),
+        "resampled": need.reshape(batch),
+    }
+
+
 def bootstrap_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: ParticleState, z: np.ndarray, k: int, dt):
     """One compiled bootstrap-PF step; same result layout as ``BootstrapParticleFilter.step``."""
     ms, hs = specs
@@ -87,20 +111,10 @@ def bootstrap_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Parti
         X, logw, noise, zf, valid, gens, per_run, ms.kind, F, G, par, *measurement_args(hs), rkind, thr,
         Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need,
     )
-    if not per_run and need.any():
-        rows = np.flatnonzero(need)
-        U = np.zeros((B, K.n_uniforms(rkind, N)))
-        U[rows] = rng.random((rows.size, U.shape[1]))
-        K.pf_resample_parallel(logw_out, need, U, rkind, Xout)
+    if not per_run:
+        _resample_with_shared_rng(rng, need, rkind, N, logw_out, Xout)
     info = {
-        "innovation": innov.reshape(*batch, m),
-        "S": S.reshape(*batch, m, m),
-        "nis": nis.reshape(batch),
-        "dof": dof.reshape(batch),
-        "loglik": loglik.reshape(batch),
-        "weights_reset": reset.reshape(batch),
-        "ess": ess.reshape(batch),
-        "resampled": need.reshape(batch),
+        **_step_info(batch, m, innov, S, nis, dof, loglik, reset, ess, need),
     }
     new = ParticleState(
         Xout.reshape(*batch, N, n),
@@ -176,20 +190,10 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
         lower, upper, filt.estimate == "best", rkind, thr,
         Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, fbest, iters, acc,
     )
-    if not per_run and need.any():
-        rows = np.flatnonzero(need)
-        U = np.zeros((B, K.n_uniforms(rkind, N)))
-        U[rows] = rng.random((rows.size, U.shape[1]))
-        K.pf_resample_parallel(logw_out, need, U, rkind, Xout)
+    if not per_run:
+        _resample_with_shared_rng(rng, need, rkind, N, logw_out, Xout)
     info = {
-        "innovation": innov.reshape(*batch, m),
-        "S": S.reshape(*batch, m, m),
-        "nis": nis.reshape(batch),
-        "dof": dof.reshape(batch),
-        "loglik": loglik.reshape(batch),
-        "weights_reset": reset.reshape(batch),
-        "ess": ess.reshape(batch),
-        "resampled": need.reshape(batch),
+        **_step_info(batch, m, innov, S, nis, dof, loglik, reset, ess, need),
         "fitness_best": fbest.reshape(batch),
         "iterations": iters.reshape(batch),
         "acceptance": (acc / (2.0 * N * np.maximum(iters, 1))).reshape(batch),
