@@ -251,8 +251,10 @@ from pursuit.models import ConstantVelocity, LinearGaussian
 sc = UNGM(steps=3); sim = sc.simulate(run_streams(1, range(2), 0), 2)
 pu.run(pu.BootstrapParticleFilter(sc.motion, sc.measurement, particles=50, backend="numba"), sim.measurements, sim.prior, rng=run_streams(2, range(2), 1))
 mot = ConstantVelocity(); meas = LinearGaussian.position(4, (0, 2), 1.0)
-pu.run(pu.KalmanFilter(mot, meas, backend="numba"), np.zeros((3, 2, 2)), pu.Gaussian(np.zeros(4), np.eye(4)))
-for d in (K.pf_step_parallel, GK.ekf_step_parallel):
+kf = pu.KalmanFilter(mot, meas, backend="numba")
+pu.run(kf, np.zeros((3, 2, 2)), pu.Gaussian(np.zeros(4), np.eye(4)))
+pu.run(kf, np.zeros((3, 2, 2)), pu.Gaussian(np.zeros(4), np.eye(4)), sequence=False)
+for d in (K.pf_step_parallel, GK.ekf_sequence_parallel, GK.ekf_step_parallel):
     print(d.__name__ if hasattr(d, "__name__") else d, dict(d.stats.cache_hits), dict(d.stats.cache_misses))
 """
     env = dict(os.environ)
@@ -261,7 +263,7 @@ for d in (K.pf_step_parallel, GK.ekf_step_parallel):
     second = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env=env)
     assert second.returncode == 0, second.stderr
     lines = [ln for ln in second.stdout.splitlines() if "{" in ln]
-    assert len(lines) == 2
+    assert len(lines) == 3
     for ln in lines:
         hits, misses = ln.split("} {")
         assert ": 1" in hits or ": 2" in hits, ln  # loaded from the cache

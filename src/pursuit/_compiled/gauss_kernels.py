@@ -277,12 +277,27 @@ def _jac_block(hk, A, idx, scale, X, H):
 # the masked update of one block
 # --------------------------------------------------------------------------
 @njit(**_NJ)
+def _update_workspace(n, m, B):
+    """Scratch arrays for :func:`_update_ws` (allocated once per block by the sequence kernel)."""
+    return (np.empty((m, B)), np.empty((m, m, B)), np.empty((m, m, B)), np.empty((m, m, B)), np.empty(B),
+            np.empty((n, m, B)), np.empty((n, m, B)), np.empty((m, n, B)), np.empty((n, n, B)), np.empty((n, n, B)),
+            np.empty((n, m, B)), np.empty((n, n, B)), np.empty(B), np.empty(B))
+
+
+@njit(**_NJ)
 def _update(xp, Pp, zp, Pzz, Pxz, H, z, v, R, angle, joseph, x_o, P_o, innov, S_o, nis, dof, loglik, ok):
     """Kalman update of one block; v (m, B) is 1.0 where measured, 0.0 where missing."""
+    _update_ws(xp, Pp, zp, Pzz, Pxz, H, z, v, R, angle, joseph, x_o, P_o, innov, S_o, nis, dof, loglik, ok,
+               _update_workspace(xp.shape[0], zp.shape[0], xp.shape[1]))
+
+
+@njit(**_NJ)
+def _update_ws(xp, Pp, zp, Pzz, Pxz, H, z, v, R, angle, joseph, x_o, P_o, innov, S_o, nis, dof, loglik, ok, ws):
+    """:func:`_update` with its scratch arrays ``ws`` from :func:`_update_workspace`."""
+    nu, S, Reff, Si, ld, Pxm, K, Hm, Am, T, KR, T2, q, dd = ws
     n = xp.shape[0]
     m = zp.shape[0]
     B = xp.shape[1]
-    nu = np.empty((m, B))
     for a in range(m):
         for c in range(B):
             d = z[a, c] - zp[a, c]
@@ -291,8 +306,6 @@ def _update(xp, Pp, zp, Pzz, Pxz, H, z, v, R, angle, joseph, x_o, P_o, innov, S_
             meas = v[a, c] > 0.0
             innov[a, c] = d if meas else np.nan
             nu[a, c] = d if meas else 0.0
-    S = np.empty((m, m, B))
-    Reff = np.empty((m, m, B))
     for a in range(m):
         for b in range(m):
             eye = 1.0 if a == b else 0.0
@@ -304,15 +317,11 @@ def _update(xp, Pp, zp, Pzz, Pxz, H, z, v, R, angle, joseph, x_o, P_o, innov, S_
                 Reff[a, b, c] = re
                 S[a, b, c] = (Pzz[a, b, c] if vv > 0.0 else 0.0) + re
     _symmetrize(S)
-    Si = np.empty((m, m, B))
-    ld = np.empty(B)
     _spd_inv(S, Si, ok, ld)
-    Pxm = np.empty((n, m, B))
     for i in range(n):
         for b in range(m):
             for c in range(B):
                 Pxm[i, b, c] = Pxz[i, b, c] * v[b, c]
-    K = np.empty((n, m, B))
     _bmm(Pxm, Si, K)
     for i in range(n):
         for c in range(B):
@@ -321,40 +330,34 @@ def _update(xp, Pp, zp, Pzz, Pxz, H, z, v, R, angle, joseph, x_o, P_o, innov, S_
             for c in range(B):
                 x_o[i, c] += K[i, b, c] * nu[b, c]
     if joseph:
-        Hm = np.empty((m, n, B))
         for a in range(m):
             for j in range(n):
                 for c in range(B):
                     Hm[a, j, c] = H[a, j, c] * v[a, c]
-        Am = np.empty((n, n, B))
         _bmm(K, Hm, Am)
         for i in range(n):
             for j in range(n):
                 eye = 1.0 if i == j else 0.0
                 for c in range(B):
                     Am[i, j, c] = eye - Am[i, j, c]
-        T = np.empty((n, n, B))
         _bmm(Am, Pp, T)
         _bmmT(T, Am, P_o)
-        KR = np.empty((n, m, B))
         _bmm(K, Reff, KR)
-        T2 = np.empty((n, n, B))
         _bmmT(KR, K, T2)
         for i in range(n):
             for j in range(n):
                 for c in range(B):
                     P_o[i, j, c] += T2[i, j, c]
     else:
-        KS = np.empty((n, m, B))
-        _bmm(K, S, KS)
-        _bmmT(KS, K, P_o)
+        _bmm(K, S, KR)  # KR holds K S here
+        _bmmT(KR, K, P_o)
         for i in range(n):
             for j in range(n):
                 for c in range(B):
                     P_o[i, j, c] = Pp[i, j, c] - P_o[i, j, c]
     _symmetrize(P_o)
-    q = np.zeros(B)
-    dd = np.zeros(B)
+    q[:] = 0.0
+    dd[:] = 0.0
     for a in range(m):
         for c in range(B):
             dd[c] += v[a, c]
@@ -447,6 +450,78 @@ def _ekf_step(x, P, z, valid, F, Q, lam, hk, A, idx, scale, R, angle,
             nis[r0 + c] = nb[c]
             dof[r0 + c] = db[c]
             loglik[r0 + c] = lb[c]
+            ok[r0 + c] = okb[c]
+
+
+def _ekf_sequence(x0, P0, zs, valid, F, Q, lam, hk, A, idx, scale, R, angle, keep_cov,
+                  means, covs, innov, S_out, nis, dof, loglik, ok):
+    """All K steps of the KF / EKF for every run, without returning to Python between steps.
+
+    The same block arithmetic as :func:`_ekf_step`, step after step, with
+    each block's state kept in block arrays.  Inputs are lane-major
+    (``x0 (n, M)``, ``P0 (n, n, M)``, ``zs`` and ``valid`` ``(K, m, M)``);
+    outputs are in the track's layout (``means (K, M, n)``, ``covs
+    (K, M, n, n)`` when ``keep_cov``, ``innov (K, M, m)``, ``S_out
+    (K, M, m, m)``, ``nis``, ``dof``, ``loglik`` ``(K, M)``).  ``ok[r]`` ends
+    False when run r's covariance or innovation covariance failed to factor
+    at any step; the caller recomputes such runs step by step.
+    """
+    n, M = x0.shape
+    m = R.shape[0]
+    K = zs.shape[0]
+    nblocks = (M + BLOCK - 1) // BLOCK
+    for bb in prange(nblocks):
+        r0 = np.int64(bb) * BLOCK
+        B = min(r0 + BLOCK, M) - r0
+        xb, Pb, zb, vb = _load(x0, P0, zs[0], valid[0], r0, B)
+        xp = np.empty((n, B))
+        cross = np.empty((n, n, B))
+        Pp = np.empty((n, n, B))
+        zp = np.empty((m, B))
+        H = np.empty((m, n, B))
+        PHt = np.empty((n, m, B))
+        Pzz = np.empty((m, m, B))
+        xo, Po = np.empty((n, B)), np.empty((n, n, B))
+        inb, Sb = np.empty((m, B)), np.empty((m, m, B))
+        nb, lb = np.empty(B), np.empty(B)
+        db = np.empty(B, dtype=np.int64)
+        okb = np.ones(B, dtype=np.bool_)
+        ws = _update_workspace(n, m, B)
+        for k in range(K):
+            for a in range(m):
+                for c in range(B):
+                    zb[a, c] = zs[k, a, r0 + c]
+                    vb[a, c] = 1.0 if valid[k, a, r0 + c] else 0.0
+            _cmv(F, xb, xp)
+            _mmT_c(Pb, F, cross)
+            _cmm(F, cross, Pp)
+            for i in range(n):
+                for j in range(n):
+                    q = Q[i, j]
+                    for c in range(B):
+                        Pp[i, j, c] = (Pp[i, j, c] if lam == 1.0 else lam * Pp[i, j, c]) + q
+            _h_block(hk, A, idx, scale, xp, zp)
+            _jac_block(hk, A, idx, scale, xp, H)
+            _bmmT(Pp, H, PHt)
+            _bmm(H, PHt, Pzz)
+            _update_ws(xp, Pp, zp, Pzz, PHt, H, zb, vb, R, angle, True, xo, Po, inb, Sb, nb, db, lb, okb, ws)
+            for c in range(B):
+                r = r0 + c
+                for i in range(n):
+                    means[k, r, i] = xo[i, c]
+                    xb[i, c] = xo[i, c]
+                    for j in range(n):
+                        Pb[i, j, c] = Po[i, j, c]
+                        if keep_cov:
+                            covs[k, r, i, j] = Po[i, j, c]
+                for a in range(m):
+                    innov[k, r, a] = inb[a, c]
+                    for b in range(m):
+                        S_out[k, r, a, b] = Sb[a, b, c]
+                nis[k, r] = nb[c]
+                dof[k, r] = db[c]
+                loglik[k, r] = lb[c]
+        for c in range(B):
             ok[r0 + c] = okb[c]
 
 
@@ -572,5 +647,7 @@ def _sigma_step(x, P, z, valid, F, Q, lam, hk, A, idx, scale, R, angle, cscale, 
 
 ekf_step_parallel = njit(parallel=True, **_NJ)(_ekf_step)
 ekf_step_serial = njit(**_NJ)(_ekf_step)
+ekf_sequence_parallel = njit(parallel=True, **_NJ)(_ekf_sequence)
+ekf_sequence_serial = njit(**_NJ)(_ekf_sequence)
 sigma_step_parallel = njit(parallel=True, **_NJ)(_sigma_step)
 sigma_step_serial = njit(**_NJ)(_sigma_step)

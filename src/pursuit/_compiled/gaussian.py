@@ -13,10 +13,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..filters.gaussian import GaussianState
+from ..gaussian import Gaussian
 from . import gauss_kernels as GK
 from .particle import measurement_args, use_parallel
 
-__all__ = ["gaussian_step", "lanes"]
+__all__ = ["gaussian_step", "gaussian_sequence", "lanes"]
 
 
 def lanes(a: np.ndarray, core: int) -> np.ndarray:
@@ -94,3 +95,63 @@ def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, 
         new_cov = new_cov.reshape(*batch, n, n)
         info = {key: v.reshape(*batch, *v.shape[1:]) for key, v in info.items()}
     return GaussianState(mean=new_mean, cov=new_cov, k=k, memory=None), info
+
+
+def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_cov: bool):
+    """All steps of a compiled KF/EKF over ``zs (K, M, m)`` from ``state``, or ``None`` where it does not apply.
+
+    Applies to a linear motion model whose ``F`` and ``Q`` are the same at
+    every step (the models' own ``dt``), one batch axis and no gate: then
+    nothing needs Python between steps.  Returns ``(means, covs, info)`` in
+    the layout of :func:`pursuit.run`, with the info keys of
+    :func:`gaussian_step` (without the smoother's).  Runs whose covariance
+    needed the NumPy repair at some step are recomputed step by step, alone.
+    """
+    ms, hs = specs
+    if len(state.batch) != 1 or filt.gate is not None:
+        return None
+    F, _, _ = ms.arrays(1, None)
+    Q = np.ascontiguousarray(ms.cov(1, None))
+    F2, _, _ = ms.arrays(2, None)
+    if not (np.array_equal(F, F2) and np.array_equal(Q, ms.cov(2, None))):
+        return None  # time-varying model: the step path evaluates it per step
+    (M,) = state.batch
+    K = zs.shape[0]
+    n = state.mean.shape[-1]
+    m = hs.dim
+    x = lanes(state.mean, 1)
+    P = lanes(np.broadcast_to(state.cov, (M, n, n)), 2)
+    zl = np.ascontiguousarray(np.moveaxis(zs, 2, 1))  # (K, m, M)
+    valid = ~np.isnan(zl)
+    lam = float(filt.fading.lam)
+    means = np.empty((K, M, n))
+    covs = np.empty((K, M, n, n) if keep_cov else (1, 1, 1, 1))
+    innov, S = np.empty((K, M, m)), np.empty((K, M, m, m))
+    nis, loglik = np.empty((K, M)), np.empty((K, M))
+    dof = np.empty((K, M), dtype=np.int64)
+    ok = np.ones(M, dtype=np.bool_)
+    kernel = GK.ekf_sequence_parallel if use_parallel(M) else GK.ekf_sequence_serial
+    kernel(x, P, zl, valid, F, Q, lam, *measurement_args(hs), keep_cov, means, covs, innov, S, nis, dof, loglik, ok)
+    info = {
+        "innovation": innov,
+        "S": S,
+        "nis": nis,
+        "dof": dof,
+        "loglik": loglik,
+        "fading": np.full((K, M), lam),
+        "faded": np.full((K, M), lam > 1.0),
+        "repaired": np.zeros((K, M), dtype=bool),
+        "gated": np.zeros((K, M), dtype=bool),
+    }
+    if not ok.all():  # recompute, step by step, the runs whose covariance needed the NumPy repair
+        from ..engine.run import run
+
+        rows = np.flatnonzero(~ok)
+        sub = Gaussian(state.mean[rows], np.broadcast_to(state.cov, (M, n, n))[rows])
+        track = run(filt, zs[:, rows], sub, keep_cov=keep_cov, sequence=False)
+        means[:, rows] = track.mean
+        if keep_cov:
+            covs[:, rows] = track.cov
+        for key in info:
+            info[key][:, rows] = track.info[key]
+    return means, (covs if keep_cov else None), info

@@ -23,6 +23,7 @@ def run(
     keep_cov: bool = True,
     store_predictions: bool = False,
     keep_info: Iterable[str] | None = None,
+    sequence: bool = True,
 ) -> Track:
     """Run a filter over a sequence of measurements.
 
@@ -48,6 +49,11 @@ def run(
         the RTS smoother needs.
     keep_info
         Info keys to keep; default all except the smoother's.
+    sequence
+        Let a filter that can (a compiled KF/EKF with a time-invariant
+        model, no gate, one batch axis) compute all steps in one call,
+        without Python between steps; the results are the same bits as
+        step by step.  ``False`` always steps from Python.
 
     Returns
     -------
@@ -68,10 +74,19 @@ def run(
 
     t0 = time.perf_counter()
     state = filt.init(prior, batch=batch, rng=rng)
-    means = np.empty((K, *state.mean.shape))
-    covs = np.empty((K, *state.mean.shape, state.mean.shape[-1])) if keep_cov else None
     infos: dict[str, np.ndarray] = {}
     wanted = None if keep_info is None else set(keep_info)
+    whole = getattr(filt, "run_sequence", None)
+    if sequence and whole is not None and dts is None and not store_predictions:
+        done = whole(state, zs, keep_cov=keep_cov)
+        if done is not None:
+            means, covs, infos = done
+            if wanted is not None:
+                infos = {key: value for key, value in infos.items() if key in wanted}
+            wall = time.perf_counter() - t0
+            return Track(mean=means, cov=covs, info=infos, name=getattr(filt, "name", type(filt).__name__), wall_time=wall)
+    means = np.empty((K, *state.mean.shape))
+    covs = np.empty((K, *state.mean.shape, state.mean.shape[-1])) if keep_cov else None
     for i in range(K):
         dt = None if dts is None else float(dts[i])
         state, info = filt.step(state, zs[i], k=i + 1, dt=dt)

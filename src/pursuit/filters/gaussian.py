@@ -278,6 +278,30 @@ class _GaussianFilter:
             return gaussian_step(self, self._specs, state, z, k, dt, self._compiled_kind)
         return self._step_numpy(state, z, k, dt)
 
+    def run_sequence(
+        self, state: GaussianState, zs: np.ndarray, *, keep_cov: bool = True
+    ) -> tuple[np.ndarray, np.ndarray | None, dict[str, np.ndarray]] | None:
+        """All steps of ``zs (K, *batch, m)`` in one compiled call, or ``None`` where that does not apply.
+
+        :func:`pursuit.run` asks this first.  It applies to the compiled
+        KF/EKF with a time-invariant linear motion model, no gate and one
+        batch axis, from a state at step 0; it gives the same bits as
+        calling :meth:`step` K times.  Returns ``(means, covs, info)`` with
+        time first (``covs`` is ``None`` unless ``keep_cov``).
+        """
+        if self._specs is None or self._compiled_kind != "ekf" or state.k != 0:
+            return None
+        zs = np.asarray(zs, dtype=float)
+        if zs.ndim != 3 or zs.shape[1:-1] != state.batch or zs.shape[-1] != self._specs[1].dim:
+            return None  # the step path broadcasts or reports the shape
+        bad = np.isinf(zs).any(axis=tuple(range(1, zs.ndim)))
+        if bad.any():
+            k = int(np.argmax(bad)) + 1
+            raise ValueError(f"step {k}: measurement contains infinity (use NaN for a missing value)")
+        from .._compiled.gaussian import gaussian_sequence
+
+        return gaussian_sequence(self, self._specs, state, zs, keep_cov)
+
     def _step_numpy(self, state: GaussianState, z: np.ndarray, k: int, dt: float | None):
         """The NumPy step (``z`` already checked and broadcast)."""
         batch = state.batch

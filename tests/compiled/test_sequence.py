@@ -1,0 +1,125 @@
+"""The compiled KF/EKF over the whole sequence (``pursuit.run``'s ``sequence``) gives the step-by-step bits."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("numba")
+
+import pursuit as pu  # noqa: E402
+from pursuit._compiled import gaussian as glue  # noqa: E402
+from pursuit.models import ConstantVelocity, LinearGaussian, RangeSensors  # noqa: E402
+
+MOTION = ConstantVelocity(ndim=2, dt=1.0, q=0.01)
+LINEAR = LinearGaussian.position(4, (0, 2), 1.0)
+RANGES = RangeSensors([[0.0, 0.0], [100.0, 0.0], [0.0, 100.0]], 2.0, (0, 2))
+
+
+def _data(meas, M=300, T=40, seed=4):
+    rng = np.random.default_rng(seed)
+    x0 = np.array([10.0, 0.5, 40.0, 0.8])
+    x = np.tile(x0, (M, 1))
+    zs = np.empty((T, M, meas.dim))
+    for k in range(T):
+        x = MOTION.sample(x, k + 1, rng)
+        zs[k] = meas.sample(x, k + 1, rng)
+    zs[3, min(7, M - 1), 0] = np.nan  # one missing component
+    zs[5, :20] = np.nan  # steps with nothing measured for some runs
+    return zs, x0
+
+
+def _assert_same_bits(a, b):
+    assert np.array_equal(a.mean, b.mean, equal_nan=True)
+    if b.cov is None:
+        assert a.cov is None
+    else:
+        assert np.array_equal(a.cov, b.cov, equal_nan=True)
+    assert sorted(a.info) == sorted(b.info)
+    for key, value in b.info.items():
+        assert a.info[key].dtype == value.dtype, key
+        assert np.array_equal(a.info[key], value, equal_nan=True), key
+
+
+@pytest.mark.parametrize("cls, meas", [(pu.KalmanFilter, LINEAR), (pu.ExtendedKalmanFilter, RANGES), (pu.ExtendedKalmanFilter, LINEAR)])
+@pytest.mark.parametrize("per_run_prior", [False, True])
+@pytest.mark.parametrize("keep_cov", [True, False])
+def test_sequence_equals_step_by_step(cls, meas, per_run_prior, keep_cov):
+    zs, x0 = _data(meas)
+    M = zs.shape[1]
+    cov = np.diag([2.0, 0.3, 2.0, 0.3])
+    prior = pu.Gaussian(np.tile(x0, (M, 1)) + np.random.default_rng(1).standard_normal((M, 4)), np.broadcast_to(cov, (M, 4, 4)).copy()) \
+        if per_run_prior else pu.Gaussian(x0, cov)
+    filt = cls(MOTION, meas, backend="numba", fading=1.05)
+    assert filt.run_sequence(filt.init(prior, batch=(M,)), zs) is not None  # the path under test applies
+    whole = pu.run(filt, zs, prior, keep_cov=keep_cov)
+    steps = pu.run(filt, zs, prior, keep_cov=keep_cov, sequence=False)
+    _assert_same_bits(whole, steps)
+
+
+def test_keep_info_selects_keys():
+    zs, x0 = _data(LINEAR, M=20, T=10)
+    filt = pu.KalmanFilter(MOTION, LINEAR, backend="numba")
+    track = pu.run(filt, zs, pu.Gaussian(x0, np.eye(4)), keep_info=["nis"])
+    assert sorted(track.info) == ["nis"]
+
+
+def test_runs_needing_repair_are_recomputed_step_by_step(monkeypatch):
+    """A run the kernel flags (its covariance would need the NumPy repair) is recomputed alone, step by step."""
+    zs, x0 = _data(LINEAR, M=50, T=15)
+    flagged = [3, 17, 40]
+    real = glue.GK
+    calls = []
+
+    class Flagging:
+        def __getattr__(self, name):
+            return getattr(real, name)
+
+        def _flag(self, kernel):
+            def call(*args):
+                calls.append(kernel)
+                kernel(*args)
+                means, ok = args[-8], args[-1]
+                ok[flagged] = False
+                means[:, flagged] = -1.0  # what the kernel left there must not survive
+            return call
+
+        @property
+        def ekf_sequence_parallel(self):
+            return self._flag(real.ekf_sequence_parallel)
+
+        @property
+        def ekf_sequence_serial(self):
+            return self._flag(real.ekf_sequence_serial)
+
+    filt = pu.KalmanFilter(MOTION, LINEAR, backend="numba")
+    prior = pu.Gaussian(x0, np.eye(4))
+    steps = pu.run(filt, zs, prior, sequence=False)
+    monkeypatch.setattr(glue, "GK", Flagging())
+    whole = pu.run(filt, zs, prior)
+    assert len(calls) == 1
+    assert whole.info["repaired"].sum() == 0  # flagged, not broken: the step path needed no repair
+    _assert_same_bits(whole, steps)
+
+
+def test_infinite_measurement_names_the_step():
+    zs, x0 = _data(LINEAR, M=5, T=8)
+    zs[4, 2, 1] = np.inf
+    filt = pu.KalmanFilter(MOTION, LINEAR, backend="numba")
+    with pytest.raises(ValueError, match="step 5: measurement contains infinity"):
+        pu.run(filt, zs, pu.Gaussian(x0, np.eye(4)))
+
+
+def test_not_used_where_a_step_needs_python():
+    """Gated filters, irregular time steps and stored predictions take the step path (and still agree with NumPy)."""
+    zs, x0 = _data(LINEAR, M=10, T=8)
+    prior = pu.Gaussian(x0, np.eye(4))
+    gated = pu.KalmanFilter(MOTION, LINEAR, backend="numba", gate=0.999)
+    state = gated.init(prior, batch=(10,))
+    assert gated.run_sequence(state, zs) is None
+    plain = pu.KalmanFilter(MOTION, LINEAR, backend="numba")
+    a = pu.run(plain, zs, prior, dts=np.full(8, 0.5))
+    b = pu.run(pu.KalmanFilter(MOTION, LINEAR), zs, prior, dts=np.full(8, 0.5))
+    assert np.allclose(a.mean, b.mean, rtol=1e-9, atol=1e-9)
+    track = pu.run(plain, zs, prior, store_predictions=True)
+    assert "pred_mean" in track.info
