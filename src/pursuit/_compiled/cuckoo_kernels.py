@@ -11,9 +11,10 @@ normals of all iterations, the uniforms of all iterations, then the
 resampler's uniforms.  The caller propagates the particles with the motion
 model's own NumPy ``sample`` (so the propagated particles are bitwise those
 of the NumPy filter: the search amplifies any rounding difference in them);
-with RunStreams (``per_run``) each run then draws its search numbers from
-its own Generator inside the kernel into the buffers ``normals`` and
-``uniforms``; with one shared Generator the caller fills them with NumPy.
+with RunStreams of PCG64 generators (``per_run``) each run then draws its
+search numbers from its own stream inside the kernel
+(:mod:`pursuit._compiled.streams`) into the buffers ``normals`` and
+``uniforms``; otherwise the caller fills them with NumPy.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from numba import njit, prange
 
 from .common import LOG_2PI, copy_by_counts, h_one, n_uniforms, resample_counts, wrap
 from .pf_kernels import exp_shifted_run, measure_run, moments_run, predictive_run
+from .streams import fill_normal, fill_random
 
 _EPS = 1e-12
 
@@ -188,7 +190,7 @@ def search_run(X, F, normals, uniforms, n_iter, alphas, pas, amin, amax, trend, 
     return iterations, accepted
 
 
-def _cuckoo_step(Xprop, logw, state_uniform, sequential, normals, uniforms, z, valid, gens, per_run,
+def _cuckoo_step(Xprop, logw, state_uniform, sequential, normals, uniforms, z, valid, addrs, per_run,
                  hk, A, idx, scale, R, angle, include_const, n_iter, alphas, pas, amin, amax, trend, kappa, beta, sigma_u,
                  scaling, yang, log_stop, use_stop, lower, upper, best_estimate, rkind, thr,
                  Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, fbest, iters, acc):
@@ -231,11 +233,8 @@ def _cuckoo_step(Xprop, logw, state_uniform, sequential, normals, uniforms, z, v
             for i in range(N):
                 F[i] = ll[i] if measured else 0.0
         if per_run and n_iter > 0:
-            g = gens[r]
-            for i in range(normals.shape[1]):
-                normals[r, i] = g.standard_normal()
-            for i in range(uniforms.shape[1]):
-                uniforms[r, i] = g.random()
+            fill_normal(addrs[r], normals[r])
+            fill_random(addrs[r], uniforms[r])
         it, ac = search_run(Xp, F, normals[r], uniforms[r], n_iter, alphas, pas, amin, amax, trend, kappa, beta, sigma_u,
                             scaling, yang, log_stop, use_stop, lower, upper, hk, A, idx, scale, R, angle, z[r], valid[r],
                             measured, add)
@@ -287,9 +286,7 @@ def _cuckoo_step(Xprop, logw, state_uniform, sequential, normals, uniforms, z, v
         if nd and per_run:
             nu = n_uniforms(rkind, N)
             U = np.empty(nu)
-            g = gens[r]
-            for i in range(nu):
-                U[i] = g.random()
+            fill_random(addrs[r], U)
             c = np.empty(N)
             tmp2 = np.empty(N)
             counts = np.empty(N, dtype=np.int64)

@@ -12,16 +12,16 @@ import threading
 from typing import Any
 
 import numpy as np
-from numba.typed import List
 
-from ..filters._workspace import memo, scratch
-from ..filters.particle import ParticleState
+from ..filters._workspace import memo, recycled, scratch
+from ..filters.particle import ParticleState, rows_rng
 from ..rng import RunStreams
 from . import pf_kernels as K
 from .common import R_MULTINOMIAL, R_RESIDUAL, R_STRATIFIED, R_SYSTEMATIC
 from .specs import MeasurementSpec, MotionSpec
+from .streams import stream_addresses
 
-__all__ = ["bootstrap_step", "typed_generators", "use_parallel", "RESAMPLER_CODES", "measurement_args"]
+__all__ = ["bootstrap_step", "run_stream_addresses", "use_parallel", "RESAMPLER_CODES", "measurement_args"]
 
 RESAMPLER_CODES = {
     "systematic": R_SYSTEMATIC,
@@ -36,11 +36,21 @@ def use_parallel(runs: int) -> bool:
     return runs > 1 and threading.current_thread() is threading.main_thread()
 
 
-def typed_generators(rng: Any, work) -> tuple[List, bool]:
-    """``(typed list of Generators, per_run)``: one per run for RunStreams, else the one shared Generator."""
-    per_run = isinstance(rng, RunStreams)
-    gens = memo(work, "compiled.generators", rng, lambda: List(rng.generators if per_run else [rng]))
-    return gens, per_run
+_NO_STREAMS = np.zeros(1, dtype=np.uint64)
+
+
+def run_stream_addresses(rng: Any, work) -> tuple[np.ndarray, bool]:
+    """``(state addresses, per_run)``: the runs' PCG64 states for the kernels to draw from.
+
+    ``per_run`` is False where the kernels cannot draw themselves (one
+    Generator shared by the batch, or streams that are not distinct PCG64
+    generators; see :func:`pursuit._compiled.streams.stream_addresses`): the
+    caller then draws with NumPy, in the NumPy filter's order.
+    """
+    if not isinstance(rng, RunStreams):
+        return _NO_STREAMS, False
+    addrs = memo(work, "compiled.streams", rng, lambda: stream_addresses(rng.generators))
+    return (_NO_STREAMS, False) if addrs is None else (addrs, True)
 
 
 def measurement_args(hs: MeasurementSpec) -> tuple:
@@ -54,13 +64,13 @@ def flat_batch(state_particles: np.ndarray) -> tuple[tuple[int, ...], int]:
     return batch, int(np.prod(batch, dtype=int))
 
 
-def _resample_with_shared_rng(rng, need: np.ndarray, rkind: int, N: int, logw_out: np.ndarray, Xout: np.ndarray) -> None:
-    """Resample the runs flagged in ``need`` with uniforms from the one shared Generator, in NumPy's order."""
+def _resample_with_numpy_draws(rng, need: np.ndarray, rkind: int, N: int, logw_out: np.ndarray, Xout: np.ndarray) -> None:
+    """Resample the runs flagged in ``need`` with uniforms drawn by NumPy (only those runs' streams), in NumPy's order."""
     if not need.any():
         return
     rows = np.flatnonzero(need)
     U = np.zeros((need.size, K.n_uniforms(rkind, N)))
-    U[rows] = rng.random((rows.size, U.shape[1]))
+    U[rows] = rows_rng(rng, rows).random((rows.size, U.shape[1]))
     K.pf_resample_parallel(logw_out, need, U, rkind, Xout)
 
 
@@ -92,15 +102,16 @@ def bootstrap_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Parti
     valid = ~np.isnan(zf)
     F, G, par = ms.arrays(k, dt)
     q = G.shape[1] if ms.kind == 0 else 1
-    gens, per_run = typed_generators(rng, work)
+    addrs, per_run = run_stream_addresses(rng, work)
     if per_run:
         noise = scratch(work, "compiled.noise", (B, N * q))
     else:  # the NumPy filter's draw, in its order, for the whole batch
         noise = np.ascontiguousarray(rng.standard_normal((*batch, N, q)).reshape(B, N * q))
     rkind = RESAMPLER_CODES[filt.resampler]
     thr = -1.0 if filt.ess_threshold is None else float(filt.ess_threshold)
-    Xout = np.empty((B, N, n))
-    logw_out = np.empty((B, N))
+    # the particle arrays are large: reuse those of the step before last when they are free (no page faults)
+    Xout = recycled(work, "compiled.particles", (B, N, n))
+    logw_out = recycled(work, "compiled.logw", (B, N))
     mean, cov = np.empty((B, n)), np.empty((B, n, n))
     innov, S = np.empty((B, m)), np.empty((B, m, m))
     nis, loglik, ess = np.empty(B), np.empty(B), np.empty(B)
@@ -108,11 +119,11 @@ def bootstrap_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Parti
     reset, need = np.empty(B, dtype=np.bool_), np.empty(B, dtype=np.bool_)
     kernel = K.pf_step_parallel if use_parallel(B) else K.pf_step_serial
     kernel(
-        X, logw, noise, zf, valid, gens, per_run, ms.kind, F, G, par, *measurement_args(hs), rkind, thr,
+        X, logw, noise, zf, valid, addrs, per_run, ms.kind, F, G, par, *measurement_args(hs), rkind, thr,
         Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need,
     )
     if not per_run:
-        _resample_with_shared_rng(rng, need, rkind, N, logw_out, Xout)
+        _resample_with_numpy_draws(rng, need, rkind, N, logw_out, Xout)
     info = {
         **_step_info(batch, m, innov, S, nis, dof, loglik, reset, ess, need),
     }
@@ -149,7 +160,7 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
     kk = 3 if search.step_scaling == "relative" else 2
     n_norm = search.n_iter * kk * N * n
     n_unif = search.n_iter * (N * n + 1 + 2 * N)
-    gens, per_run = typed_generators(rng, work)
+    addrs, per_run = run_stream_addresses(rng, work)
     if per_run:
         normals = scratch(work, "compiled.cuckoo.normals", (B, n_norm))
         uniforms = scratch(work, "compiled.cuckoo.uniforms", (B, n_unif))
@@ -183,7 +194,7 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
     reset, need = np.empty(B, dtype=np.bool_), np.empty(B, dtype=np.bool_)
     kernel = CK.cuckoo_step_parallel if use_parallel(B) else CK.cuckoo_step_serial
     kernel(
-        Xp, logw, bool(state.uniform), sequential, normals, uniforms, zf, valid, gens, per_run,
+        Xp, logw, bool(state.uniform), sequential, normals, uniforms, zf, valid, addrs, per_run,
         *measurement_args(hs), include_const,
         search.n_iter, alphas, pas, float(search.alpha_min), float(search.alpha_max), trend, float(search.kappa),
         float(search.beta), mantegna_sigma(search.beta), scaling, search.discovery == "yang", log_stop, use_stop,
@@ -191,7 +202,7 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
         Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, fbest, iters, acc,
     )
     if not per_run:
-        _resample_with_shared_rng(rng, need, rkind, N, logw_out, Xout)
+        _resample_with_numpy_draws(rng, need, rkind, N, logw_out, Xout)
     info = {
         **_step_info(batch, m, innov, S, nis, dof, loglik, reset, ess, need),
         "fitness_best": fbest.reshape(batch),

@@ -1,18 +1,20 @@
 """Compiled bootstrap particle filter: one step for a batch of runs, parallel over runs.
 
 Each run is processed by one thread from start to end (propagate, weigh,
-moments, resample) with its particles in cache, drawing from its own NumPy
-``Generator`` in the same order as the NumPy filter (process noise, then the
-resampler's uniforms), so run i's numbers do not depend on the batch.  With
-one shared Generator for the whole batch the caller draws the noise with
-NumPy in the NumPy filter's order and passes it in (``per_run=False``), and
-resampling is a second kernel after the caller has drawn the uniforms of the
-runs that resample.
+moments, resample) with its particles in cache, drawing from its own PCG64
+stream (:mod:`.streams`, ``addrs``) in the same order as the NumPy filter
+(process noise, then the resampler's uniforms), so run i's numbers do not
+depend on the batch.  Where the kernels cannot draw themselves (one shared
+Generator, or streams that are not distinct PCG64s) the caller draws the
+noise with NumPy in the NumPy filter's order and passes it in
+(``per_run=False``), and resampling is a second kernel after the caller has
+drawn the uniforms of the runs that resample.
 
 The arithmetic follows :class:`pursuit.filters.particle.ParticleFilterBase`
 step by step (see its module docstring for the meaning of every output);
-only the summation order and the floor of ``exp`` at −708 (denormal weights
-are set to 0) differ, so estimates agree with NumPy's to rounding.
+only the summation order, ``exp`` (:func:`.common.exp_weight`, within 1 ulp
+of libm's and vectorised) and its floor at −708 (denormal weights are set
+to 0) differ, so estimates agree with NumPy's to rounding.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from numba import njit, prange
 
 from .common import (
     EXP_FLOOR,
+    exp_weight,
     LOG_2PI,
     M_LINEAR,
     M_UNGM,
@@ -37,6 +40,7 @@ from .common import (
     resample_counts,
     wrap,
 )
+from .streams import fill_normal, fill_random, next_random
 
 
 @njit(cache=True, error_model="numpy")
@@ -268,7 +272,7 @@ def _h_fast(hk, A, idx, scale, Xp, i, Zp):
 
 
 @njit(cache=True, error_model="numpy")
-def _fast_run(r, X, logw, logN, noise, g, per_run, mk, F, G, par, hk, A, idx, scale, R, rkind, thr,
+def _fast_run(r, X, logw, logN, noise, addrs, per_run, mk, F, G, par, hk, A, idx, scale, R, rkind, thr,
               Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need):
     """The whole step of run r when every component is measured and no component is an angle.
 
@@ -286,13 +290,8 @@ def _fast_run(r, X, logw, logN, noise, g, per_run, mk, F, G, par, hk, A, idx, sc
     Zp = np.empty((N, m))
     nz = noise[r]
     if per_run:
-        for i in range(nz.shape[0]):
-            nz[i] = g.standard_normal()
-    uniform = True
-    for i in range(N):
-        if lw[i] + logN != 0.0:
-            uniform = False
-            break
+        fill_normal(addrs[r], nz)
+    uniform = _all_uniform(lw, logN)
     invN = 1.0 / N
     const = 0.0
     for j in range(m):
@@ -335,7 +334,7 @@ def _fast_run(r, X, logw, logN, noise, g, per_run, mk, F, G, par, hk, A, idx, sc
         else:
             o = lw[i] + logN
             v = ll + o
-            w = math.exp(o) * invN
+            w = exp_weight(o) * invN
             for j in range(m):
                 zhat[j] += w * Zp[i, j]
         if math.isnan(v):
@@ -356,15 +355,14 @@ def _fast_run(r, X, logw, logN, noise, g, per_run, mk, F, G, par, hk, A, idx, sc
         mx, s, s2, rst = exp_shifted_run(a, offset, not uniform, e)
     else:
         e = np.empty(N)
-        s = 0.0
-        s2 = 0.0
         for i in range(N):
             sh = a[i] - mx
             a[i] = sh
-            v = math.exp(sh) if sh > EXP_FLOOR else 0.0
-            e[i] = v
-            s += v
-            s2 += v * v
+            e[i] = exp_weight(sh)
+        s = 0.0
+        for i in range(N):  # in order: systematic resampling divides the running sums by this total
+            s += e[i]
+        s2 = _sum_sq(e)
     # pass 2: weighted mean and predictive spread
     mu = mean[r]
     for j in range(n):
@@ -376,7 +374,7 @@ def _fast_run(r, X, logw, logN, noise, g, per_run, mk, F, G, par, hk, A, idx, sc
         if w > 0:
             for j in range(n):
                 mu[j] += w * Xp[i, j]
-        wp = invN if uniform else math.exp(lw[i] + logN) * invN
+        wp = invN if uniform else exp_weight(lw[i] + logN) * invN
         for j in range(m):
             D[j] = Zp[i, j] - zhat[j]
         for p in range(m):
@@ -423,14 +421,13 @@ def _fast_run(r, X, logw, logN, noise, g, per_run, mk, F, G, par, hk, A, idx, sc
     need[r] = nd
     if nd and per_run:
         if rkind == R_SYSTEMATIC:
-            systematic_fill_rows(e, s, g.random(), Xp, Xout[r])
+            systematic_fill_rows(e, s, next_random(addrs[r]), Xp, Xout[r])
             for i in range(N):
                 a[i] = -logN
         else:
             nu = n_uniforms(rkind, N)
             U = np.empty(nu)
-            for i in range(nu):
-                U[i] = g.random()
+            fill_random(addrs[r], U)
             for i in range(N):
                 a[i] -= ls
             _resample_run(r, rkind, Xp, e, U, Xout, logw_out, logN)
@@ -463,6 +460,21 @@ def systematic_fill(e, s, u0, src, dst):
 
 
 @njit(cache=True, error_model="numpy")
+def systematic_fill_cdf(c, u0, src, dst):
+    """:func:`systematic_fill` from the cumulative weights ``c`` (their last entry is the total)."""
+    N = c.shape[0]
+    s = c[N - 1]
+    hist = np.zeros(N + 1, dtype=np.int64)
+    for i in range(N - 1):
+        hist[int(math.ceil((c[i] / s) * N - u0))] += 1
+    hist[N] += 1
+    p = 0
+    for j in range(N):
+        p += hist[j]
+        dst[j] = src[p]
+
+
+@njit(cache=True, error_model="numpy")
 def systematic_fill_rows(e, s, u0, src, dst):
     """:func:`systematic_fill` for particles with n components (rows of ``src``)."""
     N, n = src.shape
@@ -479,13 +491,79 @@ def systematic_fill_rows(e, s, u0, src, dst):
             dst[j, t] = src[p, t]
 
 
-@njit(cache=True, error_model="numpy")
-def _ungm_run(r, X, logw, logN, noise, g, per_run, par, scale, Rv, rkind, thr,
-              Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need):
-    """The whole step of run r for UNGM motion and measurement (n = m = 1), all in scalars.
+@njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def _sum_sq(e):
+    """Σ e_i² (reassociated, so the compiler vectorises it)."""
+    s2 = 0.0
+    for i in range(e.shape[0]):
+        s2 += e[i] * e[i]
+    return s2
 
-    Same arithmetic as :func:`_fast_run`; scalar accumulators let the
-    compiler keep everything in registers.
+
+@njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def _weighted_sum(w, x):
+    """Σ w_i x_i over the particles of positive weight (a zero-weight particle may be non-finite)."""
+    acc = 0.0
+    for i in range(w.shape[0]):
+        acc += w[i] * x[i] if w[i] > 0 else 0.0
+    return acc
+
+
+@njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def _weighted_sq_dev(w, x, c):
+    """Σ w_i (x_i − c)² over the particles of positive weight."""
+    acc = 0.0
+    for i in range(w.shape[0]):
+        d = x[i] - c
+        acc += w[i] * (d * d) if w[i] > 0 else 0.0
+    return acc
+
+
+@njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def _sq_dev(x, c):
+    """Σ (x_i − c)²."""
+    acc = 0.0
+    for i in range(x.shape[0]):
+        d = x[i] - c
+        acc += d * d
+    return acc
+
+
+@njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def _sum(x):
+    acc = 0.0
+    for i in range(x.shape[0]):
+        acc += x[i]
+    return acc
+
+
+@njit(cache=True, error_model="numpy")
+def _max(a):
+    """The largest entry of ``a`` (no NaN in it); −inf for an empty or all −inf ``a``."""
+    mx = -np.inf
+    for i in range(a.shape[0]):
+        mx = max(mx, a[i])
+    return mx
+
+
+@njit(cache=True, error_model="numpy")
+def _all_uniform(lw, logN):
+    """Whether every log-weight is exactly −log N (the run resampled, or the prior)."""
+    for i in range(lw.shape[0]):
+        if lw[i] + logN != 0.0:
+            return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, thr,
+              Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need):
+    """The whole step of run r for UNGM motion and measurement (n = m = 1).
+
+    Same arithmetic as :func:`_fast_run`, arranged in branch-free passes
+    over the particles that the compiler vectorises (propagation and
+    log-weights, ``exp``, the weighted sums), so a step costs little more
+    than its normal draws.
     """
     N = X.shape[1]
     xin = X[r, :, 0]
@@ -493,78 +571,65 @@ def _ungm_run(r, X, logw, logN, noise, g, per_run, par, scale, Rv, rkind, thr,
     a = logw_out[r]
     nz = noise[r]
     if per_run:
-        for i in range(N):
-            nz[i] = g.standard_normal()
-    uniform = True
-    for i in range(N):
-        if lw[i] + logN != 0.0:
-            uniform = False
-            break
+        fill_normal(addrs[r], nz)
+    uniform = _all_uniform(lw, logN)
     invN = 1.0 / N
     pa, pb, forcing, sq = par[0], par[1], par[2], par[3]
     iscale = 1.0 / scale
     hR = -0.5 / Rv
     zr = innov[r, 0]
     xp = np.empty(N)
-    mx = -np.inf
-    zs = 0.0
-    for i in range(N):
+    hx = np.empty(N)
+    for i in range(N):  # propagate, predict the measurement, log-likelihood
         x = xin[i]
         xn = nz[i] * sq + (x * (pa + pb / (x * x + 1.0)) + forcing)
         xp[i] = xn
         h = xn * xn * iscale
+        hx[i] = h
         d = zr - h
         v = d * d * hR
-        if uniform:
-            zs += h
-        else:
+        a[i] = v if v == v else -np.inf  # a NaN likelihood counts as zero
+    if uniform:
+        zhat = _sum(hx) * invN
+    else:  # predictive weights exp(offset)/N, offset = log w + log N
+        wp = np.empty(N)
+        for i in range(N):
             o = lw[i] + logN
-            v += o
-            zs += math.exp(o) * invN * h
-        if v != v:
-            v = -np.inf
-        a[i] = v
-        mx = max(mx, v)
-    zhat = zs * invN if uniform else zs
+            v = a[i] + o
+            a[i] = v if v == v else -np.inf
+            wp[i] = exp_weight(o) * invN
+        zhat = _weighted_sum(wp, hx)
+    mx = _max(a)
     rst = False
     e = np.empty(N)
+    c = np.empty(N)
     if not math.isfinite(mx):
         offset = np.empty(N)
         for i in range(N):
             offset[i] = lw[i] + logN
         mx, s, s2, rst = exp_shifted_run(a, offset, not uniform, e)
+        acc = 0.0
+        for i in range(N):
+            acc += e[i]
+            c[i] = acc
     else:
-        s = 0.0
-        s2 = 0.0
         for i in range(N):
             sh = a[i] - mx
             a[i] = sh
-            v = math.exp(sh) if sh > EXP_FLOOR else 0.0
-            e[i] = v
-            s += v
-            s2 += v * v
-    mu = 0.0
-    pz = 0.0
-    for i in range(N):
-        w = e[i]
-        x = xp[i]
-        if w > 0:
-            mu += w * x
-        d = x * x * iscale - zhat
-        if uniform:
-            pz += d * d
-        else:
-            pz += math.exp(lw[i] + logN) * invN * d * d
-    if uniform:
-        pz *= invN
+            e[i] = exp_weight(sh)
+        acc = 0.0
+        for i in range(N):  # the cumulative sums, in order: resampling needs them, and s is their last
+            acc += e[i]
+            c[i] = acc
+        s = acc
+        s2 = _sum_sq(e)
     inv = 1.0 / s
-    mu *= inv
-    c2 = 0.0
-    for i in range(N):
-        w = e[i]
-        if w > 0:
-            d = xp[i] - mu
-            c2 += w * d * d
+    mu = _weighted_sum(e, xp) * inv
+    if uniform:
+        pz = _sq_dev(hx, zhat) * invN
+    else:
+        pz = _weighted_sq_dev(wp, hx, zhat)
+    c2 = _weighted_sq_dev(e, xp, mu)
     mean[r, 0] = mu
     cov[r, 0, 0] = c2 * inv
     nu = zr - zhat
@@ -583,14 +648,13 @@ def _ungm_run(r, X, logw, logN, noise, g, per_run, par, scale, Rv, rkind, thr,
     need[r] = nd
     dst = Xout[r, :, 0]
     if nd and per_run and rkind == R_SYSTEMATIC:
-        systematic_fill(e, s, g.random(), xp, dst)
+        systematic_fill_cdf(c, next_random(addrs[r]), xp, dst)
         for i in range(N):
             a[i] = -logN
     elif nd and per_run:
         nu_ = n_uniforms(rkind, N)
         U = np.empty(nu_)
-        for i in range(nu_):
-            U[i] = g.random()
+        fill_random(addrs[r], U)
         for i in range(N):
             a[i] -= ls
         _resample_run(r, rkind, xp.reshape(N, 1), e, U, Xout, logw_out, logN)
@@ -601,7 +665,7 @@ def _ungm_run(r, X, logw, logN, noise, g, per_run, par, scale, Rv, rkind, thr,
 
 
 @njit(cache=True, error_model="numpy")
-def _step_body(r, X, logw, noise, z, valid, gens, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
+def _step_body(r, X, logw, noise, z, valid, addrs, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
                Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need):
     N, n = X.shape[1], X.shape[2]
     logN = math.log(N)
@@ -612,21 +676,18 @@ def _step_body(r, X, logw, noise, z, valid, gens, per_run, mk, F, G, par, hk, A,
             all_valid = False
     if all_valid and mk == UNGM and hk == M_UNGM:
         innov[r, 0] = z[r, 0]
-        _ungm_run(r, X, logw, logN, noise, gens[r] if per_run else gens[0], per_run, par, scale, R[0, 0],
+        _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, R[0, 0],
                   rkind, thr, Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need)
         return
     if all_valid and not angle:
         zv = innov[r]
         for j in range(m):
             zv[j] = z[r, j]
-        _fast_run(r, X, logw, logN, noise, gens[r] if per_run else gens[0], per_run, mk, F, G, par, hk, A, idx, scale, R,
+        _fast_run(r, X, logw, logN, noise, addrs, per_run, mk, F, G, par, hk, A, idx, scale, R,
                   rkind, thr, Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need)
         return
     if per_run:
-        g = gens[r]
-        nz = noise[r]
-        for i in range(nz.shape[0]):
-            nz[i] = g.standard_normal()
+        fill_normal(addrs[r], noise[r])
     Xp = np.empty((N, n))
     propagate_run(mk, F, G, par, X[r], noise[r], Xp)
     e = np.empty(N)
@@ -635,9 +696,7 @@ def _step_body(r, X, logw, noise, z, valid, gens, per_run, mk, F, G, par, hk, A,
     if per_run and need[r]:
         nu = n_uniforms(rkind, N)
         U = np.empty(nu)
-        g = gens[r]
-        for i in range(nu):
-            U[i] = g.random()
+        fill_random(addrs[r], U)
         _resample_run(r, rkind, Xp, e, U, Xout, logw_out, logN)
     else:
         Xout[r] = Xp
@@ -655,12 +714,12 @@ def _resample_run(r, rkind, Xp, e, U, Xout, logw_out, logN):
         logw_out[r, i] = -logN
 
 
-def _pf_step(X, logw, noise, z, valid, gens, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
+def _pf_step(X, logw, noise, z, valid, addrs, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
              Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need):
     """One bootstrap-PF step for every run (outputs written in place); see the module docstring."""
     for rr in prange(X.shape[0]):
         r = np.int64(rr)  # prange counts in uint64
-        _step_body(r, X, logw, noise, z, valid, gens, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
+        _step_body(r, X, logw, noise, z, valid, addrs, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
                    Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need)
 
 

@@ -4,15 +4,19 @@ A fresh multi-megabyte NumPy array is a fresh ``mmap`` (or heap pages that
 glibc trimmed back to the system), and touching it costs a page fault per
 4 KiB page: on this machine kind that doubled the cost of a bootstrap PF
 step.  Temporaries of a step therefore live in a :class:`Workspace` kept in
-the filter state and are overwritten by the next step; arrays that outlive
-the step (particles, estimates, info) are always fresh.
+the filter state and are overwritten by the next step.  Arrays that outlive
+the step (particles, estimates, info) are fresh, except the large
+per-particle outputs, which :func:`recycled` takes from the step before last
+when nothing but the workspace holds them any more.
 """
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
-__all__ = ["Workspace", "scratch"]
+__all__ = ["Workspace", "scratch", "memo", "recycled"]
 
 
 class Workspace:
@@ -51,3 +55,35 @@ def memo(work: Workspace | None, name: str, key: object, make):
         held = (key, make())
         work._bufs[name] = held
     return held[1]
+
+
+# CPython only: elsewhere every recycled() array is fresh
+_REFCOUNTS = hasattr(sys, "getrefcount")
+
+
+def recycled(work: Workspace | None, name: str, shape: tuple[int, ...], dtype=float) -> np.ndarray:
+    """An output array a step hands out, reusing the one it handed out two steps ago when that one is free.
+
+    The workspace keeps the last two arrays handed out under ``name``.  One
+    is reused only when the workspace holds the last reference to it (the
+    state that returned it, and every view of it, are gone), so a state the
+    caller still holds never changes.  Otherwise, and without a workspace or
+    outside CPython, the array is fresh.  Contents are undefined.
+    """
+    shape = tuple(shape)
+    if work is None or not _REFCOUNTS:
+        return np.empty(shape, dtype=dtype)
+    pool = work._bufs.get(name)
+    if pool is None:
+        pool = work._bufs[name] = []
+    dtype = np.dtype(dtype)
+    for i in range(len(pool)):
+        # references: the pool's list and getrefcount's argument, nothing else
+        if sys.getrefcount(pool[i]) == 2 and pool[i].shape == shape and pool[i].dtype == dtype:
+            pool.append(pool.pop(i))  # most recently handed out last
+            return pool[-1]
+    buf = np.empty(shape, dtype=dtype)
+    pool.append(buf)
+    if len(pool) > 2:
+        del pool[0]
+    return buf
