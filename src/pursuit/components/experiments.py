@@ -121,14 +121,17 @@ def summary_table(result: MonteCarloResult, name: str = "summary", title: str = 
 
 
 def consistency_table(result: MonteCarloResult, name: str = "consistency") -> Table | None:
-    """ANEES and ANIS with their chi-square 95 % bounds per filter (None if no filter reports them)."""
+    """ANEES and ANIS per filter with the per-step chi-square 95 % bounds (None if no filter reports them)."""
     rows = result.summary()
     cols = [c for c in CONSISTENCY_COLUMNS if any(c in r for r in rows)]
     if not cols:
         return None
     return Table(
         name,
-        "Consistency: average NEES / NIS with chi-square 95 % bounds; *_inside = share of steps inside the per-step bounds",
+        "Consistency: anees / anis = average NEES / NIS over all runs and steps; *_low, *_high = chi-square 95 % "
+        "bounds for one step's average over the runs (chi2.ppf(0.025 / 0.975, M d) / M for M runs, d dof; "
+        "not bounds for the all-step average, whose values are correlated in time); "
+        "*_inside = share of steps whose average lies inside them",
         ["filter", *cols],
         [[r["filter"], *[r.get(c) for c in cols]] for r in rows],
     )
