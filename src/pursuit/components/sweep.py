@@ -47,7 +47,7 @@ from ..report.sweep_figures import (
 )
 from ..results import MonteCarloResult
 from ..rng import run_streams
-from .experiments import build_filters, build_scenario, resolve_paper, resolve_section
+from .experiments import build_filters, build_scenario, check_run_exists, resolve_paper, resolve_section, run_index
 
 __all__ = ["SweepPlan", "run_metric", "paired_difference"]
 
@@ -93,7 +93,7 @@ SWEEP_PARAMS = (
 )
 
 FIGURE_PARAMS = (
-    Param("run", "int", 0, "which run the one-run figures show"),
+    Param("run", "int", 0, "which run the one-run figures show (0 .. runs-1)", check=run_index),
     Param("values", "any", [], "swept values that get one-run and RMSE-over-time figures", check=_values_or_empty),
     Param("log_rmse", "bool", True, "logarithmic RMSE-over-time axes"),
     Param("components", "any", [], "state labels that get their own RMSE-over-time figure", check=_str_list),
@@ -205,8 +205,13 @@ class SweepPlan:
                 self._filters(scenario, value, baselines=i == 0)
 
     # -- running -------------------------------------------------------------------
+    def check_runs(self, runs: int) -> None:
+        """Raise ``ValueError`` (naming the field) when an option refers to a run beyond ``runs``."""
+        check_run_exists("figures.run", self.figure_opts["run"], runs)
+
     def run(self, *, runs: int, seed: int, progress: bool = False, chunk_size: int | None = None) -> ExperimentOutput:
         """Run every variant and value; assemble tables and figures."""
+        self.check_runs(runs)
         sw = self.sweep
         rows: list[dict[str, Any]] = []
         per_run: dict[tuple[str, Any, str], np.ndarray] = {}
@@ -357,7 +362,7 @@ class SweepPlan:
             if value not in first_results:
                 continue
             scenario, result = first_results[value]
-            run = min(max(opts["run"], 0), result.runs - 1)
+            run = opts["run"]  # checked against the runs by check_runs
             tag = f"{label}{_fmt_value(value)}"
             anchors = getattr(getattr(scenario, "measurement", None), "anchors", None)
             figs[f"{tag}_estimates"] = trajectory(result, run, landmarks=anchors, title=f"Truth and estimates, run {run}, {label} = {value:g}")
@@ -379,7 +384,7 @@ class SweepPlan:
 
     def _clouds(self, value, scen_result, seed: int, opts) -> Any:
         scenario, result = scen_result
-        run = min(max(opts["run"], 0), result.runs - 1)
+        run = opts["run"]
         sim = scenario.simulate(run_streams(seed, [run], SCENARIO_STREAM), 1)
         snaps = {}
         for filt in self._filters(scenario, value, baselines=True):
