@@ -138,15 +138,20 @@ class MonteCarloResult:
             raise ValueError("this summary-mode result kept no example runs")
         return self.examples
 
-    def unit(self, index: int) -> str:
-        """Unit of state component ``index`` (from the scenario, else m for positions and m/s for velocities)."""
-        if self.state_units is not None:
-            return self.state_units[index]
-        if index in self.position_indices:
-            return "m"
-        if index in self.velocity_indices:
-            return "m/s"
-        return ""
+    def unit(self, index: int) -> str | None:
+        """Unit of state component ``index`` as the scenario declared it (``state_units``).
+
+        ``""`` for a dimensionless component; ``None`` when the scenario
+        declared no units (figures then show none rather than guess one).
+        """
+        if self.state_units is None:
+            return None
+        return self.state_units[index]
+
+    def component_unit(self, component: Component) -> str | None:
+        """The common unit of a component's indices (``"position"`` -> ``"m"``); None if unknown or mixed."""
+        units = {self.unit(i) for i in self.indices(component)}
+        return units.pop() if len(units) == 1 else None
 
     def _filter(self, name: str) -> FilterResult:
         try:

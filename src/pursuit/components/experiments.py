@@ -180,7 +180,7 @@ def standard_figures(result: MonteCarloResult, scenario: Any, figure_opts: dict[
     if result.velocity_indices:
         figs["rmse_velocity"] = rmse_over_time(result, "velocity", log=log)
     if not result.position_indices and not result.velocity_indices:
-        figs["rmse_state"] = rmse_over_time(result, "state", log=log, unit="")
+        figs["rmse_state"] = rmse_over_time(result, "state", log=log)
     run = run_index("figures.trajectory_run", figure_opts.get("trajectory_run", 0))
     check_run_exists("figures.trajectory_run", run, result.runs)
     # a summary-mode result keeps only its first runs whole; the title names the run drawn

@@ -39,7 +39,7 @@ from ..engine.montecarlo import FILTER_STREAM, SCENARIO_STREAM, monte_carlo
 from ..engine.snapshots import particle_snapshots
 from ..experiment import ExperimentOutput, Table
 from ..registry import Param, register
-from ..report.figures import rmse_over_time, trajectory
+from ..report.figures import labelled, rmse_over_time, trajectory
 from ..report.sweep_figures import (
     abs_error_over_time,
     metric_against_value,
@@ -343,6 +343,8 @@ class SweepPlan:
         sw = self.sweep
         label = self.label
         if len(sw["values"]) > 1:
+            # the unit of the headline component, from the scenario (the variants share the state)
+            unit = next(iter(first_results.values()))[1].component_unit(sw["component"]) if first_results else None
             # one RMSE figure per scenario variant: their scales can differ by orders of magnitude
             for variant in [v["label"] for v in self.variants] or [None]:
                 sub = [r for r in rows if variant is None or r.get("variant") == variant]
@@ -352,7 +354,7 @@ class SweepPlan:
                     label,
                     "rmse",
                     error_key="ci95",
-                    ylabel=f"{sw['component']} RMSE",
+                    ylabel=labelled(f"{sw['component']} RMSE", unit),
                     title=f"RMSE against {label}" + ("" if variant is None else f", {variant}"),
                 )
             figs[f"time_vs_{label}"] = metric_against_value(
@@ -369,11 +371,11 @@ class SweepPlan:
             if result.truth.shape[-1] == 1:
                 figs[f"{tag}_abs_error"] = abs_error_over_time(result, run, 0)
             figs[f"{tag}_rmse"] = rmse_over_time(
-                result, sw["component"], log=opts["log_rmse"], unit="", title=f"{sw['component']} RMSE over {result.runs} runs, {label} = {value:g}"
+                result, sw["component"], log=opts["log_rmse"], title=f"{sw['component']} RMSE over {result.runs} runs, {label} = {value:g}"
             )
             for comp in opts["components"]:
                 figs[f"{tag}_rmse_{comp}"] = rmse_over_time(
-                    result, comp, log=opts["log_rmse"], unit="", title=f"{comp} RMSE over {result.runs} runs, {label} = {value:g}"
+                    result, comp, log=opts["log_rmse"], title=f"{comp} RMSE over {result.runs} runs, {label} = {value:g}"
                 )
         if opts["snapshot_steps"]:
             value = opts["snapshot_value"] if opts["snapshot_value"] is not None else sw["values"][-1]
@@ -394,7 +396,7 @@ class SweepPlan:
                 filt, sim.measurements, sim.prior, run_streams(seed, [run], FILTER_STREAM), opts["snapshot_steps"]
             )
         return particle_clouds(
-            snaps, sim.truth[:, 0, :], 0, label=scenario.state_labels[0], title=f"Particles of run {run} after the step"
+            snaps, sim.truth[:, 0, :], 0, label=labelled(scenario.state_labels[0], result.unit(0)), title=f"Particles of run {run} after the step"
         )
 
 

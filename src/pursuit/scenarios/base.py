@@ -5,6 +5,9 @@ A scenario is any object with
 * ``name``, ``steps`` (K), ``dt``;
 * ``state_labels``: one label per state component (``("x", "vx", ...)``);
 * ``position_indices`` and ``velocity_indices`` (either may be empty);
+* optionally ``state_units``: the unit of each component (``("m", "m/s", ...)``,
+  ``""`` for a dimensionless one), shown on figure axes; without it the axes
+  show no units (they are not guessed);
 * ``motion`` and ``measurement``: the models a matched filter should use;
 * ``simulate(rng, runs) -> Simulation``.
 
