@@ -14,7 +14,9 @@ pursuit and simdkalman filter all runs at once.  FilterPy and Stone Soup
 have no batch mode: they filter one run after another, and their rate is
 measured on fewer runs (their cost per step does not depend on the number of
 runs); the table says how many.  ``numba 1 thread`` / ``2 threads`` use
-``numba.set_num_threads``.
+``numba.set_num_threads``.  Every other row is one core: NumPy's BLAS and
+OpenMP get one thread (``OMP_NUM_THREADS``, ``OPENBLAS_NUM_THREADS``,
+``MKL_NUM_THREADS`` = 1, set before NumPy is imported, ``_one_core.py``).
 
 Run::
 
@@ -24,14 +26,18 @@ Run::
 
 from __future__ import annotations
 
-import warnings
-from datetime import datetime, timedelta
+import _one_core  # first: the NumPy rows run on one core (benchmarks/ is on sys.path when a benchmark runs)
 
-import numpy as np
-from _timing import median_time  # benchmarks/ is on sys.path when a benchmark runs as a script
+ONE_CORE = _one_core.pin()
 
-import pursuit as pu
-from pursuit.models import ConstantVelocity, LinearGaussian, RangeBearing
+import warnings  # noqa: E402
+from datetime import datetime, timedelta  # noqa: E402
+
+import numpy as np  # noqa: E402
+from _timing import median_time  # noqa: E402
+
+import pursuit as pu  # noqa: E402
+from pursuit.models import ConstantVelocity, LinearGaussian, RangeBearing  # noqa: E402
 
 REPEATS = 3
 SENSOR = (0.0, -50.0)
@@ -261,6 +267,11 @@ def main(quick: bool = False) -> dict[str, list[dict]]:
     _row(ukf, "Stone Soup UnscentedKalmanPredictor/Updater", ss_runs, u_steps,
          stonesoup_rate("ukf", ss_runs, u_steps), f"one run at a time; {ss_runs} runs")
     _table("UKF, range-bearing sensor (M = %d, T = %d)" % (u_runs, u_steps), ukf, "FilterPy UnscentedKalmanFilter")
+    if ONE_CORE:
+        print("Rows other than numba's: one core (BLAS / OpenMP thread variables set to 1 before NumPy was imported).")
+    else:
+        print("Warning: NumPy was imported before its BLAS / OpenMP thread counts could be set to 1; "
+              "the NumPy rows may have used several cores.")
     return {"kf": kf, "ukf": ukf}
 
 

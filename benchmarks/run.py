@@ -5,6 +5,11 @@ its peers *in the same run* and prints a markdown table.  This script runs
 them in turn, captures the tables and writes them, with the machine's
 description and the command, to ``docs/benchmarks.md``.
 
+NumPy's BLAS and OpenMP run on one thread in every benchmark
+(``OMP_NUM_THREADS``, ``OPENBLAS_NUM_THREADS``, ``MKL_NUM_THREADS`` set to 1
+before NumPy is imported, :mod:`_one_core`), so "one core" rows are one core;
+the numba rows set their own thread counts.
+
 Usage::
 
     make bench                                   # peers installed in .bench-venv
@@ -13,16 +18,20 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
-import contextlib
-import importlib.util
-import io
-import os
-import platform
-import subprocess
-import sys
-from datetime import datetime, timezone
-from pathlib import Path
+import _one_core  # first: NumPy must load its BLAS with one thread (benchmarks/ is on sys.path)
+
+_one_core.pin()
+
+import argparse  # noqa: E402
+import contextlib  # noqa: E402
+import importlib.util  # noqa: E402
+import io  # noqa: E402
+import os  # noqa: E402
+import platform  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+from datetime import datetime, timezone  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 DOC = HERE.parent / "docs" / "benchmarks.md"

@@ -55,6 +55,7 @@ class BearingsScenario:
     dt: float = 1.0
     name: str = "two-bearings"
     state_labels: tuple = ("x", "vx", "y", "vy")
+    state_units: tuple = ("m", "m/s", "m", "m/s")  # optional: units on the figures' axes
     position_indices: tuple = (0, 2)
     velocity_indices: tuple = (1, 3)
     motion: ConstantVelocity = field(default_factory=lambda: ConstantVelocity(ndim=2, q=0.01))

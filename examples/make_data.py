@@ -29,6 +29,7 @@ files (tests/io/test_examples.py checks it).
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -120,7 +121,17 @@ def damage(outdir: Path, name: str) -> None:
 
 
 def main(argv: list[str]) -> int:
-    outdir = Path(argv[1]) if len(argv) > 1 else Path(__file__).parent / "data"
+    """Write the data sets; ``argv`` as ``sys.argv`` (program name first)."""
+    parser = argparse.ArgumentParser(
+        prog=Path(argv[0]).name if argv else "make_data.py",
+        description="Regenerate the example data sets (CSV, JSON Lines and the true trajectories) with "
+        "pursuit's own simulator, from fixed seeds.",
+    )
+    parser.add_argument(
+        "outdir", nargs="?", type=Path, default=Path(__file__).parent / "data",
+        help="folder to write (default: examples/data beside this script)",
+    )
+    outdir = parser.parse_args(argv[1:]).outdir
     outdir.mkdir(parents=True, exist_ok=True)
     write(outdir, "wsn-range", *wsn_range())
     write(outdir, "underwater-toa", *underwater_toa())

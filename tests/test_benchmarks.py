@@ -1,5 +1,6 @@
 """The benchmark scripts still run (quick sizes; nothing about speed is asserted here)."""
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -19,6 +20,24 @@ def test_benchmark_runner_quick_mode():
     assert proc.returncode == 0, proc.stderr
     assert "pursuit KF numpy (shared P)" in proc.stdout
     assert "pursuit UKF numpy" in proc.stdout
+    assert "Rows other than numba's: one core" in proc.stdout
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="counts threads through /proc")
+def test_one_core_pins_numpys_blas_to_one_thread():
+    # OpenBLAS starts a thread per core when NumPy loads it unless told otherwise
+    code = (
+        "import os, sys; sys.path.insert(0, {bench!r}); import _one_core; assert _one_core.pin(); "
+        "import numpy as np; np.ones((300, 300)) @ np.ones((300, 300)); "
+        "print(len(os.listdir('/proc/self/task')), os.environ['OPENBLAS_NUM_THREADS'])"
+    ).format(bench=str(ROOT / "benchmarks"))
+    env = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["1", "1"]
+    late = "import numpy, sys; sys.path.insert(0, {bench!r}); import _one_core; print(_one_core.pin())".format(bench=str(ROOT / "benchmarks"))
+    proc = subprocess.run([sys.executable, "-c", late], capture_output=True, text=True, timeout=120, env=env)
+    assert proc.stdout.strip() == "False"  # too late once NumPy is loaded, and it says so
 
 
 def test_floor_benchmark_quick_mode():

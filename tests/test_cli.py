@@ -99,3 +99,50 @@ def test_console_script_runs_as_a_subprocess(tmp_path, config):
     assert proc.returncode == 2
     assert "filterz: unknown section" in proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize(
+    "value,extra,msg",
+    [
+        ("99", [], "figures.trajectory_run: run 99 does not exist with 3 runs (runs are numbered 0..2)"),
+        ("-3", [], "figures.trajectory_run: must be a non-negative integer (runs are numbered from 0), got -3"),
+        ("2", ["--runs", "2"], "figures.trajectory_run: run 2 does not exist with 2 runs (runs are numbered 0..1)"),
+    ],
+)
+def test_impossible_trajectory_run_exits_2_at_its_line_and_writes_nothing(tmp_path, capsys, value, extra, msg):
+    p = tmp_path / "exp.toml"
+    p.write_text(GOOD + f"\n[figures]\ntrajectory_run = {value}\n")
+    line = p.read_text().splitlines().index(f"trajectory_run = {value}") + 1
+    out = tmp_path / "out"
+    assert main(["run", str(p), "--out", str(out), "--no-progress", *extra]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"pursuit: error: {p}:{line}: {msg}"]
+    assert list(tmp_path.iterdir()) == [p]  # nothing written, not even a temporary folder
+
+
+def test_trajectory_run_is_kept_whole_in_summary_mode(tmp_path):
+    from pursuit.engine.backends import engine_options
+    from pursuit.experiment import load_experiment
+
+    p = tmp_path / "exp.toml"
+    p.write_text(GOOD.replace("runs = 3", "runs = 6") + "\n[figures]\ntrajectory_run = 4\n")
+    exp = load_experiment(p)
+    with engine_options(store="summary", keep_runs=1):
+        out = exp.run()
+    result = out.result
+    assert result.store == "summary" and result.stored().runs == 5  # runs 0..4 kept, not just 1
+    assert "run 4" in out.figures["trajectory"].get_axes()[0].get_title()
+
+
+def test_impossible_sweep_run_is_refused_at_load(tmp_path):
+    from pursuit.experiment import ConfigError, load_experiment
+
+    from .components.test_sweep import SMALL
+
+    p = tmp_path / "sweep.toml"
+    p.write_text(SMALL.replace("[figures]\n", "[figures]\nrun = 6\n"))
+    with pytest.raises(ConfigError, match=r"sweep.toml:\d+: figures.run: run 6 does not exist with 6 runs"):
+        load_experiment(p)
+    p.write_text(SMALL.replace("[figures]\n", "[figures]\nrun = -1\n"))
+    with pytest.raises(ConfigError, match=r"figures.run: must be a non-negative integer"):
+        load_experiment(p)

@@ -1,8 +1,13 @@
 """Per-run random streams and seeding."""
 
+import inspect
+
 import numpy as np
 import pytest
 
+import pursuit
+import pursuit.rng
+import pursuit.scenarios
 from pursuit.rng import RunStreams, as_rng, permutations, run_seed, run_streams
 
 
@@ -58,3 +63,34 @@ def test_as_rng():
         as_rng("seed")
     with pytest.raises(TypeError):
         RunStreams([1, 2])
+
+
+def test_a_run_streams_draw_needs_a_size():
+    streams = run_streams(1, range(3), 0)
+    with pytest.raises(ValueError, match="size: RunStreams needs a size"):
+        streams.uniform()
+    with pytest.raises(ValueError, match="3 streams"):
+        streams.standard_normal((2, 4))
+
+
+@pytest.mark.parametrize(
+    "fn",
+    [
+        RunStreams.standard_normal,
+        RunStreams.random,
+        RunStreams.uniform,
+        RunStreams.integers,
+        RunStreams.permutations,
+        pursuit.rng.permutations,
+        pursuit.scenarios.simulate_markov,
+        pursuit.load,
+    ],
+    ids=lambda f: f.__qualname__,
+)
+def test_public_draws_and_loaders_are_annotated_and_documented(fn):
+    sig = inspect.signature(fn)
+    missing = [p for p in sig.parameters if p != "self" and sig.parameters[p].annotation is inspect.Parameter.empty]
+    assert not missing, missing
+    assert sig.return_annotation is not inspect.Signature.empty
+    doc = inspect.getdoc(fn)
+    assert "Parameters\n----------" in doc and "Returns\n-------" in doc

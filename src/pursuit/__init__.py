@@ -1,5 +1,10 @@
 """pursuit: tracking and positioning filters with a fair, fast Monte Carlo engine."""
 
+from __future__ import annotations
+
+import os
+from typing import TYPE_CHECKING
+
 from .engine.montecarlo import monte_carlo
 from .engine.run import run
 from .filters import (
@@ -26,13 +31,31 @@ from .track import Track
 
 __version__ = "0.1.0.dev0"
 
+if TYPE_CHECKING:
+    from .experiment import ExperimentOutput
 
-def load(folder):
-    """Read an output folder written by ``pursuit run`` / ``reproduce`` back into an ExperimentOutput.
 
-    ``load(DIR).result`` is the result object when the experiment has one;
-    ``load(DIR).results`` maps every saved result's name to it.  See
-    :func:`pursuit.storage.load`.
+def load(folder: str | os.PathLike[str]) -> ExperimentOutput:
+    """Read an output folder written by ``pursuit run`` / ``reproduce`` back.
+
+    Parameters
+    ----------
+    folder
+        The output folder (the one holding ``run.json``).
+
+    Returns
+    -------
+    ExperimentOutput
+        ``load(DIR).result`` is the result object when the experiment has
+        one; ``load(DIR).results`` maps every saved result's name to it;
+        ``tables``, ``figures`` (PNG paths) and ``sidecar`` hold the rest.
+        See :func:`pursuit.storage.load`.
+
+    Raises
+    ------
+    ValueError
+        If the folder has no ``run.json`` or a file it lists is missing or
+        damaged (the message names the file).
     """
     from .storage import load as _load
 

@@ -220,14 +220,35 @@ def psd_factor(Q: np.ndarray, tol: float = 1e-12) -> np.ndarray:
 
 
 def numerical_jacobian(
-    fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, rel_step: float = 6e-6
+    fun: Callable[[np.ndarray], np.ndarray],
+    x: np.ndarray,
+    rel_step: float = 6e-6,
+    residual: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
 ) -> np.ndarray:
     """Central-difference Jacobian of a batched function.
 
-    ``fun`` maps ``(*b, n) -> (*b, m)`` and must accept any leading batch
-    axes (every pursuit model does).  All ``2n`` perturbed states are
-    evaluated in a single call, so the cost is one model evaluation on a
-    ``2n``-times larger batch.  Returns ``(*b, m, n)``.
+    Parameters
+    ----------
+    fun
+        Maps ``(*b, n) -> (*b, m)`` and must accept any leading batch axes
+        (every pursuit model does).  All ``2n`` perturbed states are
+        evaluated in a single call, so the cost is one model evaluation on
+        a ``2n``-times larger batch.
+    x
+        ``(*b, n)`` points at which to differentiate.
+    rel_step
+        Step per component: ``rel_step * max(1, |x_j|)``.
+    residual
+        ``residual(a, b)``: the difference of two values of ``fun`` (a
+        measurement model's ``residual``, which wraps angles).  Without it,
+        ``a - b``; a bearing then jumps by 2π where the two perturbed
+        values straddle the ±π cut, and the derivative is wrong by about
+        π / step.
+
+    Returns
+    -------
+    np.ndarray
+        ``(*b, m, n)``.
     """
     x = np.asarray(x, dtype=float)
     n = x.shape[-1]
@@ -236,7 +257,8 @@ def numerical_jacobian(
     steps = h[..., None, :] * eye  # (*b, n, n): row j perturbs component j
     xs = np.concatenate([x[..., None, :] + steps, x[..., None, :] - steps], axis=-2)
     fx = np.asarray(fun(xs), dtype=float)  # (*b, 2n, m)
-    diff = (fx[..., :n, :] - fx[..., n:, :]) / (2.0 * h[..., :, None])  # (*b, n, m)
+    delta = fx[..., :n, :] - fx[..., n:, :] if residual is None else np.asarray(residual(fx[..., :n, :], fx[..., n:, :]), dtype=float)
+    diff = delta / (2.0 * h[..., :, None])  # (*b, n, m)
     return np.swapaxes(diff, -1, -2)
 
 

@@ -184,6 +184,8 @@ def _execute(exp, out_dir: Path, args, backend) -> None:
 def _cmd_run(args) -> int:
     _check_overrides(args, args.config)
     exp = load_experiment(args.config)
+    if args.runs is not None:
+        exp.check_runs(args.runs)
     out = Path(args.out) if args.out else Path("results") / exp.name
     with _backend(args, args.config) as backend:
         _execute(exp, out, args, backend)
@@ -199,6 +201,9 @@ def _cmd_reproduce(args) -> int:
         raise ConfigError(args.name, "no bundled experiments found")
     # Validate every file before running any, so a bad one stops the batch early.
     exps = [load_experiment(find_experiment(n)) for n in names]
+    if args.runs is not None:
+        for exp in exps:
+            exp.check_runs(args.runs)
     root = Path(args.out) if args.out else Path("results")
     with _backend(args, args.name) as backend:
         for exp in exps:

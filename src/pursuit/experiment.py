@@ -126,11 +126,39 @@ class Experiment:
     plan: Any
     reference: str = ""
 
+    def check_runs(self, runs: int) -> None:
+        """Check the options that name a run (such as ``figures.trajectory_run``) against ``runs``.
+
+        Raises
+        ------
+        ConfigError
+            Naming the file, the field's line and the field, when an option
+            refers to a run that ``runs`` runs do not have.
+        """
+        check = getattr(self.plan, "check_runs", None)
+        if check is None:
+            return
+        try:
+            check(runs)
+        except ValueError as e:
+            try:
+                text = self.path.read_text(encoding="utf-8")
+            except OSError:
+                text = ""
+            raise config_error(self.path, text, e) from None
+
     def run(
         self, *, runs: int | None = None, seed: int | None = None, progress: bool = False, chunk_size: int | None = None
     ) -> ExperimentOutput:
-        """Run it; ``runs`` and ``seed`` override the file's values."""
+        """Run it; ``runs`` and ``seed`` override the file's values.
+
+        Raises
+        ------
+        ConfigError
+            When an option names a run beyond ``runs`` (nothing is run).
+        """
         runs = self.runs if runs is None else runs
+        self.check_runs(runs)
         seed = self.seed if seed is None else seed
         chunk = self.chunk_size if chunk_size is None else chunk_size
         out = self.plan.run(runs=runs, seed=seed, progress=progress, chunk_size=chunk)
@@ -190,7 +218,11 @@ def load_experiment(path: str | Path) -> Experiment:
     path = Path(path)
     text, doc = read_toml(path)
     try:
-        return _build(doc, path)
+        exp = _build(doc, path)
+        check = getattr(exp.plan, "check_runs", None)
+        if check is not None:
+            check(exp.runs)
+        return exp
     except ValueError as e:
         raise config_error(path, text, e) from None
 

@@ -12,7 +12,8 @@ Arrays are time-major: estimates and truth ``(K, M, n)``, covariances
 * NIS: νᵀ S⁻¹ ν, χ²(m).
 
 The χ² bounds for an average of M independent χ²(d) values are
-``chi2.ppf([α/2, 1 − α/2], M d) / M``.
+``chi2.ppf([α/2, 1 − α/2], M d) / M``: exact for one step's ANEES or ANIS
+over M runs, not for an average over time steps (correlated values).
 """
 
 from __future__ import annotations

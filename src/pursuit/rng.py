@@ -21,7 +21,10 @@ from typing import Callable, Sequence, Union
 
 import numpy as np
 
-__all__ = ["RunStreams", "RNGLike", "as_rng", "permutations", "run_seed", "run_streams"]
+__all__ = ["RunStreams", "RNGLike", "Size", "as_rng", "permutations", "run_seed", "run_streams"]
+
+Size = Union[int, Sequence[int]]
+"""A draw's shape: an int or a sequence of ints (for :class:`RunStreams`, the first is the number of runs)."""
 
 
 class RunStreams:
@@ -56,7 +59,9 @@ class RunStreams:
     def __repr__(self) -> str:
         return f"RunStreams({len(self)} runs)"
 
-    def _check(self, size: Sequence[int] | int) -> tuple[int, ...]:
+    def _check(self, size: Size | None) -> tuple[int, ...]:
+        if size is None:
+            raise ValueError(f"size: RunStreams needs a size whose first entry is the number of runs ({len(self)})")
         size = (size,) if np.isscalar(size) else tuple(size)
         if len(size) == 0 or size[0] != len(self.generators):
             raise ValueError(
@@ -64,7 +69,7 @@ class RunStreams:
             )
         return size
 
-    def _fill(self, size, draw: Callable[[np.random.Generator, np.ndarray], None]) -> np.ndarray:
+    def _fill(self, size: Size, draw: Callable[[np.random.Generator, np.ndarray], None]) -> np.ndarray:
         size = self._check(size)
         out = np.empty(size, dtype=float)
         # a (runs,)-shaped draw fills one-element rows (a 0-d row is not writable)
@@ -72,27 +77,117 @@ class RunStreams:
             draw(g, row)
         return out
 
-    def standard_normal(self, size) -> np.ndarray:
-        """Standard normal draws of shape ``size`` (``size[0]`` = number of runs)."""
+    def standard_normal(self, size: Size) -> np.ndarray:
+        """Standard normal draws, row i from run i's generator.
+
+        Parameters
+        ----------
+        size
+            Output shape; ``size[0]`` must be the number of runs (an int is
+            the shape ``(size,)``).
+
+        Returns
+        -------
+        np.ndarray
+            float64 draws of shape ``size``.
+
+        Raises
+        ------
+        ValueError
+            If ``size[0]`` is not the number of runs.
+        """
         return self._fill(size, lambda g, row: g.standard_normal(out=row))
 
-    def random(self, size) -> np.ndarray:
-        """Uniform draws on [0, 1) of shape ``size``."""
+    def random(self, size: Size) -> np.ndarray:
+        """Uniform draws on [0, 1), row i from run i's generator.
+
+        Parameters
+        ----------
+        size
+            Output shape; ``size[0]`` must be the number of runs.
+
+        Returns
+        -------
+        np.ndarray
+            float64 draws of shape ``size``.
+
+        Raises
+        ------
+        ValueError
+            If ``size[0]`` is not the number of runs.
+        """
         return self._fill(size, lambda g, row: g.random(out=row))
 
-    def uniform(self, low: float = 0.0, high: float = 1.0, size=None) -> np.ndarray:
-        """Uniform draws on [low, high) of shape ``size``."""
+    def uniform(self, low: float = 0.0, high: float = 1.0, size: Size | None = None) -> np.ndarray:
+        """Uniform draws on [low, high), row i from run i's generator.
+
+        Parameters
+        ----------
+        low, high
+            The interval (scalars).
+        size
+            Output shape; ``size[0]`` must be the number of runs (required;
+            the default None exists only to match ``Generator.uniform``).
+
+        Returns
+        -------
+        np.ndarray
+            float64 draws of shape ``size``.
+
+        Raises
+        ------
+        ValueError
+            If ``size`` is None or ``size[0]`` is not the number of runs.
+        """
         u = self.random(size)
         return low + (high - low) * u
 
-    def integers(self, low: int, high: int | None = None, size=None) -> np.ndarray:
-        """Integer draws of shape ``size``, as ``Generator.integers``."""
+    def integers(self, low: int, high: int | None = None, size: Size | None = None) -> np.ndarray:
+        """Integer draws, row i from run i's generator, as ``Generator.integers``.
+
+        Parameters
+        ----------
+        low, high
+            Draws lie in [low, high); with ``high`` None, in [0, low).
+        size
+            Output shape; ``size[0]`` must be the number of runs (required).
+
+        Returns
+        -------
+        np.ndarray
+            int64 draws of shape ``size``.
+
+        Raises
+        ------
+        ValueError
+            If ``size`` is None or ``size[0]`` is not the number of runs.
+        """
         size = self._check(size)
         rows = [g.integers(low, high, size=size[1:]) for g in self.generators]
         return np.stack(rows)
 
-    def permutations(self, n: int, size) -> np.ndarray:
-        """Independent random permutations of ``range(n)``: shape ``(*size, n)``."""
+    def permutations(self, n: int, size: Size) -> np.ndarray:
+        """Independent random permutations of ``range(n)``, row i from run i's generator.
+
+        Parameters
+        ----------
+        n
+            Length of each permutation.
+        size
+            Shape of the batch of permutations; ``size[0]`` must be the
+            number of runs.
+
+        Returns
+        -------
+        np.ndarray
+            Integer array of shape ``(*size, n)``; each last-axis row is a
+            permutation of ``0 .. n-1``.
+
+        Raises
+        ------
+        ValueError
+            If ``size[0]`` is not the number of runs.
+        """
         size = self._check(size)
         return np.stack([_permutations(g, n, size[1:]) for g in self.generators])
 
@@ -114,8 +209,26 @@ def as_rng(rng: RNGLike) -> np.random.Generator | RunStreams:
     raise TypeError(f"rng must be None, an int, a SeedSequence, a Generator or RunStreams, got {type(rng).__name__}")
 
 
-def permutations(rng: np.random.Generator | RunStreams, n: int, size) -> np.ndarray:
-    """Random permutations of ``range(n)`` of shape ``(*size, n)`` from either rng form."""
+def permutations(rng: np.random.Generator | RunStreams, n: int, size: Size) -> np.ndarray:
+    """Random permutations of ``range(n)`` from either rng form.
+
+    Parameters
+    ----------
+    rng
+        One Generator for the whole batch, or :class:`RunStreams` (then
+        ``size[0]`` must be the number of runs and row i is drawn from run
+        i's generator).
+    n
+        Length of each permutation.
+    size
+        Shape of the batch of permutations (an int is ``(size,)``).
+
+    Returns
+    -------
+    np.ndarray
+        Integer array of shape ``(*size, n)``; each last-axis row is a
+        permutation of ``0 .. n-1``.
+    """
     if isinstance(rng, RunStreams):
         return rng.permutations(n, size)
     size = (size,) if np.isscalar(size) else tuple(size)

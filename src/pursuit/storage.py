@@ -244,7 +244,9 @@ def write_per_step_csv(path: str | Path, experiment: str, results: dict[str, Mon
     """Per-step summaries over all runs: one row per (result, filter, step); returns the number of rows.
 
     Columns: ``experiment, result, filter, step, time, runs``, ``rmse_position``,
-    ``rmse_velocity``, ``rmse_LABEL`` per component, ``anees``, ``anis`` and
+    ``rmse_velocity``, ``rmse_LABEL`` per component, ``anees``, ``anees_low``,
+    ``anees_high`` (the step's 95 % χ² bounds,
+    :meth:`MonteCarloResult.consistency_bounds`), the same for ``anis``, and
     ``mean_KEY`` for each scalar step-info value.  Available in both storage
     modes and bit-identical between them.
     """
@@ -262,7 +264,8 @@ def write_per_step_csv(path: str | Path, experiment: str, results: dict[str, Mon
                 try:
                     cols[what] = getattr(result, what)(name)
                 except ValueError:
-                    pass
+                    continue
+                cols[f"{what}_low"], cols[f"{what}_high"] = result.consistency_bounds(name, what[1:])
             for ik in result.info_keys(name):
                 cols[f"mean_{ik}"] = result.info_mean(name, ik)
             for k in range(result.steps):

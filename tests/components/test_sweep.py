@@ -132,3 +132,37 @@ def test_particle_filters_and_ungm_are_registered():
     assert {"pf", "upf", "cs-pf", "ics-pf"} <= names
     assert registry.get("filter", "sir").name == "pf"
     assert "ungm" in {c.name for c in registry.components("scenario")}
+
+
+WSN_SMALL = (
+    SMALL.replace('type = "ungm"\nsteps = 12', 'type = "wsn-range"\nsteps = 8\nanchors = [[0.0, 0.0], [100.0, 0.0]]')
+    .replace("[sweep]", '[sweep]\ncomponent = "position"')
+    .replace("snapshot_steps = [2, 12]", "snapshot_steps = [2, 8]")
+)
+
+
+def _labels(figures):
+    return {
+        name: [(ax.get_xlabel(), ax.get_ylabel()) for ax in fig.get_axes() if ax.get_visible()]
+        for name, fig in figures.items()
+    }
+
+
+def test_sweep_figures_carry_the_scenarios_units(tmp_path):
+    # every axis of a physical quantity carries the unit the scenario declares (metres here), and the
+    # one-run error plot's x axis is time in seconds (it plots result.times)
+    out = load_experiment(_write(tmp_path, WSN_SMALL)).run(runs=3, seed=1)
+    labels = _labels(out.figures)
+    assert labels["rmse_vs_N"] == [("N", "position RMSE (m)")]
+    assert labels["time_vs_N"] == [("N", "wall time (s)")]
+    assert labels["N40_rmse"] == [("time (s)", "position RMSE (m)")]
+    assert labels["N40_estimates"] == [("x (m)", "y (m)")]
+    assert set(labels["N40_particles"]) == {("particle index", "x (m)")}
+
+
+def test_sweep_figures_of_a_dimensionless_state_show_no_made_up_unit(tmp_path):
+    out = load_experiment(_write(tmp_path, SMALL)).run(runs=3, seed=1)
+    labels = _labels(out.figures)
+    assert labels["N40_abs_error"] == [("time (s)", "|x error|")]  # UNGM's x is dimensionless
+    assert labels["N40_rmse"] == [("time (s)", "state RMSE")]
+    assert labels["rmse_vs_N"] == [("N", "state RMSE")]

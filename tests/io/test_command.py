@@ -237,3 +237,38 @@ def test_a_particle_filter_whose_weights_all_underflow_recovers_and_says_so(tmp_
     for row in rows:
         assert all(np.isfinite(float(v)) for v in row[:9])
         assert ("weights_reset" in row[11].split(";")) == (float(row[0]) in a1_times)
+
+
+@pytest.mark.parametrize("text", ["", "# no records yet\n\n"])
+def test_an_empty_csv_file_is_an_error_and_nothing_is_written(tmp_path, capsys, text):
+    data = tmp_path / "empty.csv"
+    data.write_text(text)
+    out = tmp_path / "est.csv"
+    assert main(["track", str(data), "-c", WSN_MODEL, "-o", str(out)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith(f"pursuit track: error: {data}:") and ": header: missing: the input " in err[0]
+    assert "nothing written" in err[1]
+    assert not out.exists()
+
+
+def test_time_and_value_infinities_are_reported_alike(tmp_path, capsys):
+    data = tmp_path / "inf.csv"
+    data.write_text("time,sensor,value\ninf,A1,40\n2.0,A1,inf\n")
+    assert main(["track", str(data), "-c", WSN_MODEL]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[:2] == [
+        f"pursuit track: error: {data}:2: time: 'inf' is not finite (a time must be a finite number of seconds)",
+        f"pursuit track: error: {data}:3: value: 'inf' is not finite (write nan or leave it empty for a missing value)",
+    ]
+
+
+def test_a_huge_gap_names_the_time_field(tmp_path, capsys):
+    data = tmp_path / "gap.csv"
+    data.write_text("time,sensor,value\n1.0,A1,40\n1e300,A1,41\n")
+    assert main(["track", str(data), "-c", WSN_MODEL]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == (
+        f"pursuit track: error: {data}:3: time: rejected at time 1e+300: 1e+300 s after the previous step at 1.0 "
+        "is a gap the filter cannot predict across (the filter failed: a number overflows)"
+    )
+    assert "Numerical result out of range" not in "\n".join(err)

@@ -100,3 +100,15 @@ def test_the_python_example_runs_from_the_repository_root(monkeypatch):
         exec(compile(block, "track.md", "exec"), namespace)
     result = namespace["result"]
     assert result.problems == [] and len(result.estimates) == 59
+
+
+def test_make_data_has_a_help_and_writes_nothing_for_it(tmp_path):
+    res = subprocess.run(
+        [sys.executable, str(EXAMPLES / "make_data.py"), "--help"], capture_output=True, text=True, cwd=tmp_path, timeout=120
+    )
+    assert res.returncode == 0 and res.stdout.startswith("usage: make_data.py [-h] [outdir]")
+    assert list(tmp_path.iterdir()) == []  # --help is not taken for the output folder
+    res = subprocess.run(
+        [sys.executable, str(EXAMPLES / "make_data.py"), "a", "b"], capture_output=True, text=True, cwd=tmp_path, timeout=120
+    )
+    assert res.returncode == 2 and "unrecognized arguments: b" in res.stderr

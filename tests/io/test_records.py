@@ -53,6 +53,8 @@ def test_quoted_csv_fields():
         (",A,1", "time", "missing"),
         ("nan,A,1", "time", "must be a number"),
         ("1e999,A,1", "time", "too large"),
+        ("inf,A,1", "time", "'inf' is not finite (a time must be a finite number of seconds)"),
+        ("-Infinity,A,1", "time", "'-Infinity' is not finite"),
         ("1,,1", "sensor", "missing"),
         ("1,A,inf", "value", "not finite"),
         ("1,A,-Infinity", "value", "not finite"),
@@ -83,6 +85,21 @@ def test_a_missing_header_is_reported_and_the_rest_still_read():
     _same(out[1:], [(2, 2.0, "A", (2.0,))])
 
 
+@pytest.mark.parametrize(
+    "text,line,what",
+    [("", 1, "the input is empty"), ("\n# a comment\n\n", 3, "the input has only blank and comment lines")],
+)
+def test_an_input_without_a_header_is_a_bad_header(text, line, what):
+    out = _csv(text)
+    assert [(r.line, r.field) for r in out] == [(line, "header")]
+    assert out[0].message == f"missing: {what} (expected the header 'time,sensor,value')"
+
+
+def test_a_bad_first_line_is_not_also_reported_as_a_missing_header():
+    out = list(read_csv([b"\xff\n"]))
+    assert [(r.line, r.field) for r in out] == [(1, "record")]
+
+
 def test_invalid_utf8_is_a_bad_record():
     out = list(read_csv([b"time,sensor,value\n", b"1,\xff\xfe,1\n", b"2,A,2\n"]))
     assert isinstance(out[0], BadRecord) and out[0].line == 2 and "UTF-8" in out[0].message
@@ -110,7 +127,8 @@ def test_jsonl_records():
         ('{"time": "1", "sensor": "A", "value": 1}', "time", "expected a number"),
         ('{"time": true, "sensor": "A", "value": 1}', "time", "expected a number"),
         ('{"time": NaN, "sensor": "A", "value": 1}', "time", "NaN"),
-        ('{"time": 1e999, "sensor": "A", "value": 1}', "time", "not finite"),
+        ('{"time": 1e999, "sensor": "A", "value": 1}', "time", "not finite (a time must be a finite number of seconds)"),
+        ('{"time": Infinity, "sensor": "A", "value": 1}', "time", "not finite (a time must be a finite number of seconds)"),
         ('{"time": 1, "sensor": "A", "value": Infinity}', "value", "not finite"),
         ('{"time": 1, "sensor": "A", "value": -Infinity}', "value", "not finite"),
         ('{"time": 1, "sensor": "A", "value": 1' + "0" * 400 + "}", "value", "too large"),

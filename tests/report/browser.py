@@ -28,6 +28,7 @@ FLAGS = [
     "--headless",
     "--no-sandbox",
     "--disable-gpu",
+    "--disable-dev-shm-usage",  # containers often have a tiny /dev/shm; Chromium then crashes tabs
     "--disable-quic",
     "--no-first-run",
     "--no-default-browser-check",

@@ -78,6 +78,43 @@ def test_standard_figures_are_publication_ready(result):
             assert re.search(r"\(.+\)", ax.get_xlabel()), (name, ax.get_xlabel())
 
 
+def _labels(figs):
+    return {name: [(ax.get_xlabel(), ax.get_ylabel()) for ax in fig.get_axes()] for name, fig in figs.items()}
+
+
+def test_standard_figures_carry_the_scenarios_units(result):
+    assert _labels(standard_figures(result, SMALL, {})) == {
+        "rmse_position": [("time (s)", "position RMSE (m)")],
+        "rmse_velocity": [("time (s)", "velocity RMSE (m/s)")],
+        "trajectory": [("x (m)", "y (m)")],
+    }
+
+
+class _Feet:
+    """SMALL with its positions declared in feet (a unit the library cannot guess)."""
+
+    def __init__(self, units):
+        self.state_units = units
+
+    def __getattr__(self, key):
+        return getattr(SMALL, key)
+
+
+def test_figure_units_come_from_the_scenario_never_guessed():
+    feet = monte_carlo(_Feet(("ft", "ft/s", "ft", "ft/s")), small_filters(), 2, 2)
+    assert _labels(standard_figures(feet, SMALL, {})) == {
+        "rmse_position": [("time (s)", "position RMSE (ft)")],
+        "rmse_velocity": [("time (s)", "velocity RMSE (ft/s)")],
+        "trajectory": [("x (ft)", "y (ft)")],
+    }
+    # a scenario that declares no units gets none, not metres
+    unknown = monte_carlo(_Feet(None), small_filters(), 2, 2)
+    assert unknown.unit(0) is None
+    labels = _labels(standard_figures(unknown, SMALL, {}))
+    assert labels["rmse_position"] == [("time (s)", "position RMSE")]
+    assert labels["trajectory"] == [("x", "y")]
+
+
 def test_summary_mode_figures_use_the_kept_runs():
     summ = monte_carlo(SMALL, small_filters(), 12, 2, store="summary", keep_runs=2, chunk_size=5)
     figs = standard_figures(summ, SMALL, {"trajectory_run": 7})

@@ -7,7 +7,8 @@ from pathlib import Path
 from typing import Any
 
 from .. import registry
-from ..engine.montecarlo import monte_carlo, validate_filters
+from ..engine.backends import current_options
+from ..engine.montecarlo import DEFAULT_KEEP_RUNS, monte_carlo, validate_filters
 from ..experiment import ExperimentOutput, Table
 from ..registry import Param, register
 from ..report.figures import rmse_over_time, trajectory
@@ -24,8 +25,24 @@ __all__ = [
     "PAPER_PARAMS",
 ]
 
+def run_index(field_name: str, v: int) -> int:
+    """A ``Param`` check: a run number is a non-negative integer (runs are numbered from 0)."""
+    if v < 0:
+        raise ValueError(f"{field_name}: must be a non-negative integer (runs are numbered from 0), got {v}")
+    return v
+
+
+def check_run_exists(field_name: str, index: int, runs: int) -> None:
+    """Raise ``ValueError`` naming ``field_name`` when run ``index`` does not exist among ``runs`` runs."""
+    if index >= runs:
+        raise ValueError(
+            f"{field_name}: run {index} does not exist with {runs} run{'s' if runs != 1 else ''} "
+            f"(runs are numbered 0..{runs - 1})"
+        )
+
+
 FIGURE_PARAMS = (
-    Param("trajectory_run", "int", 0, "which run's trajectory to draw"),
+    Param("trajectory_run", "int", 0, "which run's trajectory to draw (0 .. runs-1)", check=run_index),
     Param("log_rmse", "bool", False, "logarithmic RMSE axes"),
 )
 
@@ -121,14 +138,17 @@ def summary_table(result: MonteCarloResult, name: str = "summary", title: str = 
 
 
 def consistency_table(result: MonteCarloResult, name: str = "consistency") -> Table | None:
-    """ANEES and ANIS with their chi-square 95 % bounds per filter (None if no filter reports them)."""
+    """ANEES and ANIS per filter with the per-step chi-square 95 % bounds (None if no filter reports them)."""
     rows = result.summary()
     cols = [c for c in CONSISTENCY_COLUMNS if any(c in r for r in rows)]
     if not cols:
         return None
     return Table(
         name,
-        "Consistency: average NEES / NIS with chi-square 95 % bounds; *_inside = share of steps inside the per-step bounds",
+        "Consistency: anees / anis = average NEES / NIS over all runs and steps; *_low, *_high = chi-square 95 % "
+        "bounds for one step's average over the runs (chi2.ppf(0.025 / 0.975, M d) / M for M runs, d dof; "
+        "not bounds for the all-step average, whose values are correlated in time); "
+        "*_inside = share of steps whose average lies inside them",
         ["filter", *cols],
         [[r["filter"], *[r.get(c) for c in cols]] for r in rows],
     )
@@ -160,8 +180,11 @@ def standard_figures(result: MonteCarloResult, scenario: Any, figure_opts: dict[
     if result.velocity_indices:
         figs["rmse_velocity"] = rmse_over_time(result, "velocity", log=log)
     if not result.position_indices and not result.velocity_indices:
-        figs["rmse_state"] = rmse_over_time(result, "state", log=log, unit="")
-    run = min(max(figure_opts.get("trajectory_run", 0), 0), result.stored().runs - 1)
+        figs["rmse_state"] = rmse_over_time(result, "state", log=log)
+    run = run_index("figures.trajectory_run", figure_opts.get("trajectory_run", 0))
+    check_run_exists("figures.trajectory_run", run, result.runs)
+    # a summary-mode result keeps only its first runs whole; the title names the run drawn
+    run = min(run, result.stored().runs - 1)
     anchors = getattr(getattr(scenario, "measurement", None), "anchors", None)
     figs["trajectory"] = trajectory(result, run, landmarks=anchors)
     return figs
@@ -178,10 +201,19 @@ class MonteCarloPlan:
     paper: list[dict[str, Any]]
     sections: dict[str, Any] = field(repr=False)
 
+    def check_runs(self, runs: int) -> None:
+        """Raise ``ValueError`` (naming the field) when an option refers to a run beyond ``runs``."""
+        check_run_exists("figures.trajectory_run", self.figure_opts["trajectory_run"], runs)
+
     def run(self, *, runs: int, seed: int, progress: bool = False, chunk_size: int | None = None) -> ExperimentOutput:
         """Run the comparison and assemble tables and figures."""
+        self.check_runs(runs)
+        # in summary mode, keep the run whose trajectory is drawn among the runs kept whole
+        keep = current_options().keep_runs
+        keep = max(DEFAULT_KEEP_RUNS if keep is None else keep, self.figure_opts["trajectory_run"] + 1)
         result = monte_carlo(
-            self.scenario, self.filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections
+            self.scenario, self.filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections,
+            keep_runs=keep,
         )
         tables = [summary_table(result)]
         consistency = consistency_table(result)

@@ -39,7 +39,7 @@ from ..engine.montecarlo import FILTER_STREAM, SCENARIO_STREAM, monte_carlo
 from ..engine.snapshots import particle_snapshots
 from ..experiment import ExperimentOutput, Table
 from ..registry import Param, register
-from ..report.figures import rmse_over_time, trajectory
+from ..report.figures import labelled, rmse_over_time, trajectory
 from ..report.sweep_figures import (
     abs_error_over_time,
     metric_against_value,
@@ -47,7 +47,7 @@ from ..report.sweep_figures import (
 )
 from ..results import MonteCarloResult
 from ..rng import run_streams
-from .experiments import build_filters, build_scenario, resolve_paper, resolve_section
+from .experiments import build_filters, build_scenario, check_run_exists, resolve_paper, resolve_section, run_index
 
 __all__ = ["SweepPlan", "run_metric", "paired_difference"]
 
@@ -93,7 +93,7 @@ SWEEP_PARAMS = (
 )
 
 FIGURE_PARAMS = (
-    Param("run", "int", 0, "which run the one-run figures show"),
+    Param("run", "int", 0, "which run the one-run figures show (0 .. runs-1)", check=run_index),
     Param("values", "any", [], "swept values that get one-run and RMSE-over-time figures", check=_values_or_empty),
     Param("log_rmse", "bool", True, "logarithmic RMSE-over-time axes"),
     Param("components", "any", [], "state labels that get their own RMSE-over-time figure", check=_str_list),
@@ -205,8 +205,13 @@ class SweepPlan:
                 self._filters(scenario, value, baselines=i == 0)
 
     # -- running -------------------------------------------------------------------
+    def check_runs(self, runs: int) -> None:
+        """Raise ``ValueError`` (naming the field) when an option refers to a run beyond ``runs``."""
+        check_run_exists("figures.run", self.figure_opts["run"], runs)
+
     def run(self, *, runs: int, seed: int, progress: bool = False, chunk_size: int | None = None) -> ExperimentOutput:
         """Run every variant and value; assemble tables and figures."""
+        self.check_runs(runs)
         sw = self.sweep
         rows: list[dict[str, Any]] = []
         per_run: dict[tuple[str, Any, str], np.ndarray] = {}
@@ -338,6 +343,8 @@ class SweepPlan:
         sw = self.sweep
         label = self.label
         if len(sw["values"]) > 1:
+            # the unit of the headline component, from the scenario (the variants share the state)
+            unit = next(iter(first_results.values()))[1].component_unit(sw["component"]) if first_results else None
             # one RMSE figure per scenario variant: their scales can differ by orders of magnitude
             for variant in [v["label"] for v in self.variants] or [None]:
                 sub = [r for r in rows if variant is None or r.get("variant") == variant]
@@ -347,7 +354,7 @@ class SweepPlan:
                     label,
                     "rmse",
                     error_key="ci95",
-                    ylabel=f"{sw['component']} RMSE",
+                    ylabel=labelled(f"{sw['component']} RMSE", unit),
                     title=f"RMSE against {label}" + ("" if variant is None else f", {variant}"),
                 )
             figs[f"time_vs_{label}"] = metric_against_value(
@@ -357,18 +364,18 @@ class SweepPlan:
             if value not in first_results:
                 continue
             scenario, result = first_results[value]
-            run = min(max(opts["run"], 0), result.runs - 1)
+            run = opts["run"]  # checked against the runs by check_runs
             tag = f"{label}{_fmt_value(value)}"
             anchors = getattr(getattr(scenario, "measurement", None), "anchors", None)
             figs[f"{tag}_estimates"] = trajectory(result, run, landmarks=anchors, title=f"Truth and estimates, run {run}, {label} = {value:g}")
             if result.truth.shape[-1] == 1:
                 figs[f"{tag}_abs_error"] = abs_error_over_time(result, run, 0)
             figs[f"{tag}_rmse"] = rmse_over_time(
-                result, sw["component"], log=opts["log_rmse"], unit="", title=f"{sw['component']} RMSE over {result.runs} runs, {label} = {value:g}"
+                result, sw["component"], log=opts["log_rmse"], title=f"{sw['component']} RMSE over {result.runs} runs, {label} = {value:g}"
             )
             for comp in opts["components"]:
                 figs[f"{tag}_rmse_{comp}"] = rmse_over_time(
-                    result, comp, log=opts["log_rmse"], unit="", title=f"{comp} RMSE over {result.runs} runs, {label} = {value:g}"
+                    result, comp, log=opts["log_rmse"], title=f"{comp} RMSE over {result.runs} runs, {label} = {value:g}"
                 )
         if opts["snapshot_steps"]:
             value = opts["snapshot_value"] if opts["snapshot_value"] is not None else sw["values"][-1]
@@ -379,7 +386,7 @@ class SweepPlan:
 
     def _clouds(self, value, scen_result, seed: int, opts) -> Any:
         scenario, result = scen_result
-        run = min(max(opts["run"], 0), result.runs - 1)
+        run = opts["run"]
         sim = scenario.simulate(run_streams(seed, [run], SCENARIO_STREAM), 1)
         snaps = {}
         for filt in self._filters(scenario, value, baselines=True):
@@ -389,7 +396,7 @@ class SweepPlan:
                 filt, sim.measurements, sim.prior, run_streams(seed, [run], FILTER_STREAM), opts["snapshot_steps"]
             )
         return particle_clouds(
-            snaps, sim.truth[:, 0, :], 0, label=scenario.state_labels[0], title=f"Particles of run {run} after the step"
+            snaps, sim.truth[:, 0, :], 0, label=labelled(scenario.state_labels[0], result.unit(0)), title=f"Particles of run {run} after the step"
         )
 
 

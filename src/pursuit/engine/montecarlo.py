@@ -39,6 +39,7 @@ __all__ = [
     "ChunkSummary",
     "ChunkTask",
     "combine_chunks",
+    "FullCollector",
     "combine_summaries",
     "SummaryCollector",
     "DEFAULT_CHUNK",
@@ -193,35 +194,96 @@ def _result_fields(scenario: Any) -> dict[str, Any]:
     )
 
 
+class FullCollector:
+    """Copies chunk results, as they arrive in any order, into one full-mode result.
+
+    The arrays for all runs are allocated when the first chunk arrives and
+    each chunk is copied into its slice, so the caller can drop it at once:
+    memory is the result plus the chunks in flight, not the result twice
+    (as concatenating every chunk at the end would need).  A single chunk
+    that covers every run is kept as it is, without a copy.  The result is
+    the same bits as concatenating the chunks in run order.
+    """
+
+    def __init__(self, scenario: Any, filters: Sequence[Any], seed: int, config: dict | None, runs: int):
+        self.scenario, self.filters, self.seed, self.config, self.runs = scenario, list(filters), int(seed), config, runs
+        self.spans: list[tuple[int, int]] = []
+        self.times: np.ndarray | None = None
+        self.truth: np.ndarray | None = None
+        self.measurements: np.ndarray | None = None
+        self.tracks: dict[str, dict[str, Any]] = {}
+        self.walls = {f.name: 0.0 for f in self.filters}
+
+    def _put(self, buf: np.ndarray | None, part: np.ndarray, start: int, what: str) -> np.ndarray:
+        if buf is None:
+            buf = np.empty((part.shape[0], self.runs, *part.shape[2:]), dtype=part.dtype)
+        elif part.shape[:1] + part.shape[2:] != buf.shape[:1] + buf.shape[2:]:
+            raise RuntimeError(f"{what}: a chunk has shape {part.shape}, another {buf.shape} (runs on axis 1)")
+        elif part.dtype != buf.dtype and not np.can_cast(part.dtype, buf.dtype, "safe"):
+            buf = buf.astype(np.result_type(buf.dtype, part.dtype))
+        buf[:, start : start + part.shape[1]] = part
+        return buf
+
+    def add(self, chunk: ChunkResult) -> None:
+        """Copy one chunk in (then the caller can drop it)."""
+        self.spans.append((chunk.start, chunk.stop))
+        if self.times is None:
+            self.times = chunk.times
+        whole = (chunk.start, chunk.stop) == (0, self.runs) and self.truth is None
+        if whole:  # the only chunk: its arrays are the result's
+            self.truth, self.measurements = chunk.truth, chunk.measurements
+        else:
+            self.truth = self._put(self.truth, chunk.truth, chunk.start, "truth")
+            self.measurements = self._put(self.measurements, chunk.measurements, chunk.start, "measurements")
+        for filt in self.filters:
+            name = filt.name
+            part = chunk.tracks[name]
+            self.walls[name] += part.wall_time
+            slot = self.tracks.get(name)
+            if slot is None:
+                slot = self.tracks[name] = {"estimates": None, "covariances": None, "info": {}, "has_cov": part.covariances is not None}
+                slot["keys"] = set(part.info)
+            if set(part.info) != slot["keys"] or (part.covariances is not None) != slot["has_cov"]:
+                raise RuntimeError(f"{name}: chunks differ in what they kept (info keys or covariances)")
+            if whole:
+                slot["estimates"], slot["covariances"], slot["info"] = part.estimates, part.covariances, dict(part.info)
+                continue
+            slot["estimates"] = self._put(slot["estimates"], part.estimates, chunk.start, f"{name}.estimates")
+            if part.covariances is not None:
+                slot["covariances"] = self._put(slot["covariances"], part.covariances, chunk.start, f"{name}.covariances")
+            for key, value in part.info.items():
+                slot["info"][key] = self._put(slot["info"].get(key), value, chunk.start, f"{name}.info[{key!r}]")
+
+    def result(self) -> MonteCarloResult:
+        """The full-mode :class:`MonteCarloResult`."""
+        _check_tiling(self.spans, self.runs)
+        results: dict[str, FilterResult] = {}
+        for filt in self.filters:
+            slot = self.tracks[filt.name]
+            results[filt.name] = FilterResult(
+                filt.name, slot["estimates"], slot["covariances"], slot["info"], float(self.walls[filt.name])
+            )
+        return MonteCarloResult(
+            seed=self.seed,
+            times=self.times,
+            truth=self.truth,
+            measurements=self.measurements,
+            filters=results,
+            config=self.config,
+            **_result_fields(self.scenario),
+        )
+
+
 def combine_chunks(
     chunks: Sequence[ChunkResult], scenario: Any, filters: Sequence[Any], seed: int, config: dict | None
 ) -> MonteCarloResult:
     """Concatenate chunk results, in run order, into one :class:`MonteCarloResult`."""
     chunks = sorted(chunks, key=lambda c: c.start)
     _check_tiling([(c.start, c.stop) for c in chunks], chunks[-1].stop)
-    truth = np.concatenate([c.truth for c in chunks], axis=1)
-    zs = np.concatenate([c.measurements for c in chunks], axis=1)
-    results: dict[str, FilterResult] = {}
-    for filt in filters:
-        parts = [c.tracks[filt.name] for c in chunks]
-        covs = None if parts[0].covariances is None else np.concatenate([p.covariances for p in parts], axis=1)
-        info = {key: np.concatenate([p.info[key] for p in parts], axis=1) for key in parts[0].info}
-        results[filt.name] = FilterResult(
-            filt.name,
-            np.concatenate([p.estimates for p in parts], axis=1),
-            covs,
-            info,
-            float(sum(p.wall_time for p in parts)),
-        )
-    return MonteCarloResult(
-        seed=int(seed),
-        times=chunks[0].times,
-        truth=truth,
-        measurements=zs,
-        filters=results,
-        config=config,
-        **_result_fields(scenario),
-    )
+    collector = FullCollector(scenario, filters, seed, config, chunks[-1].stop)
+    for c in chunks:
+        collector.add(c)
+    return collector.result()
 
 
 class SummaryCollector:
@@ -296,12 +358,42 @@ def validate_filters(filters: Sequence[Any]) -> list[Any]:
     return filters
 
 
+def _measurement_dim(scenario: Any, n: int) -> int:
+    """The measurement dimension m of the scenario's model (``dim``, else the size of ``cov(1)``, else n)."""
+    model = getattr(scenario, "measurement", None)
+    dim = getattr(model, "dim", None)
+    if isinstance(dim, (int, np.integer)) and not isinstance(dim, bool):
+        return int(dim)
+    try:
+        return int(np.shape(model.cov(1))[-1])
+    except Exception:  # a user's model without dim or cov(k): the state dimension is a fair guess
+        return n
+
+
+INFO_SCALARS = 8
+"""Scalar step-info values per run and step counted by the estimate (NIS, dof, log-likelihood, fading
+factor or ESS, flags ...: the bundled filters keep 4 to 10, some of them one byte)."""
+
+
 def _estimated_bytes(scenario: Any, filters: Sequence[Any], runs: int, keep_cov: bool) -> int:
-    """Rough size of the full-mode arrays: truth, measurements, estimates, covariances, info."""
+    """Bytes of the arrays a full-mode result holds.
+
+    Per run and step, in float64: truth (n), measurements (m), and per filter
+    its estimates (n), covariances (n², when kept) and step info: the
+    innovation (m), its covariance S (m²) and :data:`INFO_SCALARS` scalars.
+    The real size was 0.73-1.07 times this for each filter of the bundled
+    experiments (0.86-1.03 for each experiment's filters together);
+    ``tests/engine/test_memory.py`` checks 0.7-1.1.  While it runs, the engine
+    also holds the chunks in flight and the filters' working memory for one
+    chunk (each chunk is copied into the result as it arrives and dropped,
+    see :class:`FullCollector`), which grows with the chunk size, not with
+    the number of runs.
+    """
     n = len(scenario.state_labels)
+    m = _measurement_dim(scenario, n)
     steps = int(getattr(scenario, "steps", 100))
-    per_filter = n + (n * n if keep_cov else 0) + 4
-    return 8 * steps * runs * (2 * n + len(filters) * per_filter)
+    per_filter = n + (n * n if keep_cov else 0) + m + m * m + INFO_SCALARS
+    return 8 * steps * runs * (n + m + len(filters) * per_filter)
 
 
 def resolve_store(store: str, scenario: Any, filters: Sequence[Any], runs: int, keep_cov: bool) -> str:
@@ -409,16 +501,18 @@ def monte_carlo(
         if callable(progress):
             progress(bar.done, bar.total)
 
-    collector = SummaryCollector(scenario, filters, int(seed), config, runs) if store == "summary" else None
-    chunks: dict[tuple[int, int], ChunkResult] = {}
+    collector: SummaryCollector | FullCollector
+    if store == "summary":
+        collector = SummaryCollector(scenario, filters, int(seed), config, runs)
+    else:
+        collector = FullCollector(scenario, filters, int(seed), config, runs)
 
     def on_result(span: tuple[int, int], part: Any) -> None:
-        if span in chunks or (collector is not None and span in collector.spans):
+        if span in collector.spans:
             raise RuntimeError(f"the backend returned runs {span[0]}..{span[1] - 1} twice")
-        if collector is not None:
-            collector.add(part)  # folded in and dropped: memory stays bounded by the chunk size
-        else:
-            chunks[span] = part
+        # summary: folded in and dropped, memory stays bounded by the chunk size;
+        # full: copied into the result's arrays and dropped, so the runs are not held twice
+        collector.add(part)
         if not isinstance(backend, Serial):
             advance(len(filters))
 
@@ -431,9 +525,7 @@ def monte_carlo(
         bar.close()
         if owned is not None:
             owned.close()
-    if collector is not None:
-        return collector.result()
-    missing = sorted(set(spans) - set(chunks))
+    missing = sorted(set(spans) - set(collector.spans))
     if missing:
         raise RuntimeError(f"the backend returned no result for runs {missing[0][0]}..{missing[-1][1] - 1}")
-    return combine_chunks([chunks[s] for s in spans], scenario, filters, int(seed), config)
+    return collector.result()

@@ -42,6 +42,8 @@ FORMATS = ("csv", "jsonl")
 _NUMBER = re.compile(r"^[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?$")
 _NAN = {"nan", "+nan", "-nan"}
 _CSV_HEADERS = (("time", "sensor", "value"), ("time", "sensor", "values"))
+_INF = {"inf", "infinity"}
+_TIME_FINITE = "a time must be a finite number of seconds"
 _JSON_KEYS = ("time", "sensor", "value", "values")
 
 
@@ -112,6 +114,8 @@ def _parse_time_text(text: str) -> float:
         raise _Bad("time", "missing")
     if t.lower() in _NAN:
         raise _Bad("time", "must be a number, got nan")
+    if t.lower().lstrip("+-") in _INF:
+        raise _Bad("time", f"{_show(t)} is not finite ({_TIME_FINITE})")
     if not _NUMBER.match(t):
         raise _Bad("time", f"not a number: {_show(t)}")
     v = float(t)
@@ -125,8 +129,7 @@ def _parse_value_text(text: str, field: str) -> float:
     if not t or t.lower() in _NAN:
         return math.nan
     if not _NUMBER.match(t):
-        low = t.lower().lstrip("+-")
-        if low in ("inf", "infinity"):
+        if t.lower().lstrip("+-") in _INF:
             raise _Bad(field, f"{_show(t)} is not finite (write nan or leave it empty for a missing value)")
         raise _Bad(field, f"not a number: {_show(t)}")
     v = float(t)
@@ -151,7 +154,7 @@ def _json_number(v: Any, field: str, *, allow_missing: bool) -> float:
             return math.nan
         raise _Bad(field, "must be a number, got NaN")
     if not math.isfinite(f):
-        raise _Bad(field, "not finite (use null for a missing value)")
+        raise _Bad(field, f"not finite ({'use null for a missing value' if allow_missing else _TIME_FINITE})")
     return f
 
 
@@ -190,15 +193,18 @@ def read_csv(lines: Iterable[bytes | str]) -> Iterator[Record | BadRecord]:
     """Records from CSV lines (bytes or text, newlines included or not).
 
     The first line that is neither blank nor a ``#`` comment must be the
-    header ``time,sensor,value`` (or ``values``).  Never raises on bad
-    input: every problem comes out as a :class:`BadRecord`.
+    header ``time,sensor,value`` (or ``values``); an input without one (an
+    empty file, or only blank and comment lines) is a bad ``header``.  Never
+    raises on bad input: every problem comes out as a :class:`BadRecord`.
     """
-    header_seen = False
+    header_seen = content_seen = False
+    lineno = 0
     for lineno, raw in enumerate(lines, start=1):
         try:
             text = _decode(raw, lineno)
             if not text.strip() or text.lstrip().startswith("#"):
                 continue
+            content_seen = True
             fields = _split_csv(text)
             if not header_seen:
                 header_seen = True
@@ -208,7 +214,11 @@ def read_csv(lines: Iterable[bytes | str]) -> Iterator[Record | BadRecord]:
                 continue
             yield _csv_record(lineno, fields)
         except _Bad as e:
+            content_seen = True
             yield BadRecord(lineno, e.field, e.message)
+    if not content_seen:  # nothing but blank and comment lines: no header to read
+        what = "the input is empty" if lineno == 0 else "the input has only blank and comment lines"
+        yield BadRecord(max(lineno, 1), "header", f"missing: {what} (expected the header 'time,sensor,value')")
 
 
 def _split_csv(text: str) -> list[str]:

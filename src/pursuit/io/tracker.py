@@ -6,7 +6,9 @@ motion models take dt per step, so irregular sampling needs nothing else)
 and gives an :class:`Estimate`.  A step that would leave the filter with a
 non-finite or non-positive estimate (a measurement absurd enough to overflow,
 a gap of 10³⁰⁰ s) is refused: the state stays as it was and the step's
-records are reported as bad, so no NaN ever reaches the output.
+records are reported as bad (field ``time`` when a prediction alone over the
+gap already breaks the filter, else ``record``), so no NaN ever reaches the
+output.
 """
 
 from __future__ import annotations
@@ -58,7 +60,17 @@ class Estimate:
 
 
 class StepRefused(Exception):
-    """A step whose update would break the filter; the state is unchanged."""
+    """A step whose update would break the filter; the state is unchanged.
+
+    ``field`` names what to blame: ``"time"`` when even a prediction over
+    the step's gap would break the filter (a gap of 10³⁰⁰ s), else
+    ``"record"`` (the update with the step's measurements, from the state
+    the filter is in).
+    """
+
+    def __init__(self, message: str, field: str = "record"):
+        super().__init__(message)
+        self.field = field
 
 
 class Tracker:
@@ -77,6 +89,21 @@ class Tracker:
         self.time = model.prior_time
         self.k = 0
 
+    def _try(self, z: np.ndarray, dt: float):
+        """One filter step from the current state: ``(problem, state, info, mean, var)``, problem '' if healthy."""
+        try:
+            with np.errstate(all="ignore"):  # overflow is detected below, not warned about
+                state, info = self.model.filter.step(self.state, z[None, :], k=self.k + 1, dt=dt)
+                mean = np.asarray(state.mean, dtype=float)[0]
+                cov = np.asarray(state.cov, dtype=float)[0]
+                var = np.diagonal(cov).copy()
+                healthy = np.all(np.isfinite(mean)) and np.all(np.isfinite(cov)) and np.all(var > 0)
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError) as e:
+            return f"the filter failed: {_describe(e)}", None, None, None, None
+        if not healthy:
+            return "the estimate would not be finite with positive variances", None, None, None, None
+        return "", state, info, mean, var
+
     def update(self, step: Step) -> Estimate:
         """Advance to ``step.time`` and update with ``step.z``.
 
@@ -84,22 +111,21 @@ class Tracker:
         ------
         StepRefused
             When the result would not be finite with a positive variance; the
-            tracker's state is left unchanged.
+            tracker's state is left unchanged.  Its ``field`` is ``"time"``
+            when a prediction alone over the gap ``dt`` already breaks the
+            filter, else ``"record"``.
         """
         dt = self.model.dt if self.time is None else step.time - self.time
         if not dt > 0:  # pragma: no cover - the step assembler guarantees increasing times
-            raise StepRefused(f"time {step.time!r} is not after {self.time!r}")
-        try:
-            with np.errstate(all="ignore"):  # overflow is detected below, not warned about
-                state, info = self.model.filter.step(self.state, step.z[None, :], k=self.k + 1, dt=dt)
-                mean = np.asarray(state.mean, dtype=float)[0]
-                cov = np.asarray(state.cov, dtype=float)[0]
-                var = np.diagonal(cov).copy()
-                healthy = np.all(np.isfinite(mean)) and np.all(np.isfinite(cov)) and np.all(var > 0)
-        except (ArithmeticError, ValueError, np.linalg.LinAlgError) as e:
-            raise StepRefused(f"the filter failed on this step (dt = {dt:g} s): {e}") from None
-        if not healthy:
-            raise StepRefused(f"the filter's estimate would not be finite after this step (dt = {dt:g} s)")
+            raise StepRefused(f"time {step.time!r} is not after {self.time!r}", "time")
+        problem, state, info, mean, var = self._try(step.z, dt)
+        if problem:
+            # blame the gap when a prediction alone over it breaks the filter, else the measurement
+            gap_problem = self._try(np.full_like(step.z, np.nan), dt)[0] if np.any(np.isfinite(step.z)) else problem
+            since = "the prior" if self.time is None else f"the previous step at {self.time!r}"
+            if gap_problem:
+                raise StepRefused(f"{dt:g} s after {since} is a gap the filter cannot predict across ({gap_problem})", "time")
+            raise StepRefused(f"updating with this step's measurements would break the filter (dt = {dt:g} s): {problem}", "record")
         self.state, self.time, self.k = state, step.time, self.k + 1
         dof = int(np.asarray(info["dof"]).reshape(-1)[0])
         flags = [key for key, value in info.items() if _true_flag(value)]
@@ -116,13 +142,19 @@ class Tracker:
         )
 
 
+def _describe(e: Exception) -> str:
+    if isinstance(e, OverflowError):
+        return "a number overflows"
+    return f"{type(e).__name__}: {e}" if str(e) else type(e).__name__
+
+
 def _true_flag(value) -> bool:
     arr = np.asarray(value)
     return arr.dtype == bool and arr.size == 1 and bool(arr.reshape(-1)[0])
 
 
-def _refused(step: Step, reason: str) -> list[BadRecord]:
-    return [BadRecord(line, "record", f"rejected at time {step.time!r}: {reason}") for line in step.lines]
+def _refused(step: Step, refusal: StepRefused) -> list[BadRecord]:
+    return [BadRecord(line, refusal.field, f"rejected at time {step.time!r}: {refusal}") for line in step.lines]
 
 
 @dataclass
@@ -198,7 +230,7 @@ def stream_records(
             try:
                 yield tracker.update(event)
             except StepRefused as e:
-                yield from _refused(event, str(e))
+                yield from _refused(event, e)
                 if stop_at_bad:
                     return
         else:

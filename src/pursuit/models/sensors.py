@@ -181,7 +181,7 @@ def _jacobian(model: Any, x: np.ndarray, k: int | None) -> np.ndarray:
     jac = getattr(model, "jacobian", None)
     if jac is not None:
         return np.asarray(jac(x, k), dtype=float)
-    return numerical_jacobian(lambda xs: model.h(xs, k), x)
+    return numerical_jacobian(lambda xs: model.h(xs, k), x, residual=getattr(model, "residual", None))
 
 
 def stack(parts: Sequence[Any]) -> Any:

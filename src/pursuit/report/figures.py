@@ -9,9 +9,7 @@ from matplotlib.figure import Figure
 
 from ..results import MonteCarloResult
 
-__all__ = ["rmse_over_time", "trajectory", "fading_over_time", "mark_events", "UNITS", "figure_problems"]
-
-UNITS = {"position": "m", "velocity": "m/s", "acceleration": "m/s²"}
+__all__ = ["rmse_over_time", "trajectory", "fading_over_time", "mark_events", "figure_problems", "labelled"]
 
 
 def _new(width: float = 6.4, height: float = 4.0) -> tuple[Figure, object]:
@@ -41,7 +39,9 @@ def rmse_over_time(
     log
         Logarithmic y axis.
     unit
-        Unit for the y label (default from the component name).
+        Unit for the y label (default: the scenario's unit of the
+        component, :meth:`MonteCarloResult.component_unit`; none when it
+        declared none or the component mixes units).
     filters
         Subset and order of filters (default all).
     title
@@ -57,14 +57,9 @@ def rmse_over_time(
         ax.plot(result.times, result.rmse_per_step(name, component), label=name, linewidth=1.4)
     if log:
         ax.set_yscale("log")
-    if unit is not None:
-        u = unit
-    else:
-        idx = result.indices(component)
-        units = {result.unit(i) for i in idx}
-        u = units.pop() if len(units) == 1 else UNITS.get(label, "")
+    u = result.component_unit(component) if unit is None else unit
     ax.set_xlabel("time (s)")
-    ax.set_ylabel(f"{label} RMSE ({u})" if u else f"{label} RMSE")
+    ax.set_ylabel(labelled(f"{label} RMSE", u))
     ax.set_title(title or f"{label.capitalize()} RMSE over {result.runs} runs")
     mark_events(ax, events)
     ax.grid(True, alpha=0.3)
@@ -112,8 +107,8 @@ def trajectory(
         if landmarks is not None and len(landmarks):
             lm = np.asarray(landmarks)
             ax.scatter(lm[:, 0], lm[:, 1], marker="^", color="tab:red", zorder=5, label="sensors")
-        ax.set_xlabel(_labelled(result.state_labels[i], result.unit(i) or "m"))
-        ax.set_ylabel(_labelled(result.state_labels[j], result.unit(j) or "m"))
+        ax.set_xlabel(labelled(result.state_labels[i], result.unit(i)))
+        ax.set_ylabel(labelled(result.state_labels[j], result.unit(j)))
         ax.set_aspect("equal", adjustable="datalim")
     else:
         i = pos[0]
@@ -121,7 +116,7 @@ def trajectory(
         for name in names:
             ax.plot(result.times, result.filters[name].estimates[:, run, i], linewidth=1.2, label=name)
         ax.set_xlabel("time (s)")
-        ax.set_ylabel(_labelled(result.state_labels[i], result.unit(i)))
+        ax.set_ylabel(labelled(result.state_labels[i], result.unit(i)))
     ax.set_title(title or f"Truth and estimates, run {run}")
     ax.grid(True, alpha=0.3)
     ax.legend()
@@ -186,7 +181,8 @@ def fading_over_time(
     return fig
 
 
-def _labelled(name: str, unit: str) -> str:
+def labelled(name: str, unit: str | None) -> str:
+    """An axis label: ``name (unit)``; the bare name for a dimensionless (``""``) or unknown (None) unit."""
     return f"{name} ({unit})" if unit else name
 
 

@@ -23,9 +23,9 @@ __all__ = ["write_output", "format_table", "versions", "cell", "FILES"]
 
 FILES = {
     "run.json": "the sidecar: experiment, root seed, runs, configuration, package versions, tables, file manifest",
-    "summary.csv": "one row per filter: RMSEs, consistency, wall time",
+    "summary.csv": "one row per filter: RMSEs, per-component RMS, wall time",
     "errors.csv": "tidy errors: one row per (result, filter, run, step); estimate minus truth per component, NEES, NIS",
-    "per_step.csv": "per (result, filter, step): RMSE of each component over all runs, ANEES, ANIS, step-info means",
+    "per_step.csv": "per (result, filter, step): RMSE of each component over all runs, ANEES, ANIS with the step's chi-square 95 % bounds, step-info means",
     "report.html": "this report (self-contained)",
 }
 

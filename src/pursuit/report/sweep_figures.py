@@ -8,6 +8,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ..results import MonteCarloResult
+from .figures import labelled
 
 __all__ = ["abs_error_over_time", "particle_clouds", "metric_against_value"]
 
@@ -24,8 +25,8 @@ def abs_error_over_time(
         err = np.abs(result.filters[name].estimates[:, run, component] - result.truth[:, run, component])
         ax.plot(result.times, err, linewidth=1.2, label=name)
     label = result.state_labels[component]
-    ax.set_xlabel("time step")
-    ax.set_ylabel(f"|{label} error|")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel(labelled(f"|{label} error|", result.unit(component)))
     ax.set_title(title or f"Absolute error of {label}, run {run}")
     ax.grid(True, alpha=0.3)
     ax.legend()
@@ -51,6 +52,8 @@ def particle_clouds(
         ``(K, n)`` truth of that run; a horizontal line marks the true value.
     component
         State component to plot.
+    label
+        Its axis label, with the unit (e.g. ``"x (m)"``).
     """
     names = list(snapshots)
     steps = sorted({s for snap in snapshots.values() for s in snap})

@@ -5,6 +5,9 @@ A scenario is any object with
 * ``name``, ``steps`` (K), ``dt``;
 * ``state_labels``: one label per state component (``("x", "vx", ...)``);
 * ``position_indices`` and ``velocity_indices`` (either may be empty);
+* optionally ``state_units``: the unit of each component (``("m", "m/s", ...)``,
+  ``""`` for a dimensionless one), shown on figure axes; without it the axes
+  show no units (they are not guessed);
 * ``motion`` and ``measurement``: the models a matched filter should use;
 * ``simulate(rng, runs) -> Simulation``.
 
@@ -17,6 +20,7 @@ chunked.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -58,11 +62,39 @@ class Simulation:
         return self.truth.shape[1]
 
 
-def simulate_markov(motion, measurement, x0: np.ndarray, steps: int, rng) -> tuple[np.ndarray, np.ndarray]:
+def simulate_markov(
+    motion: Any, measurement: Any, x0: np.ndarray, steps: int, rng: np.random.Generator | RunStreams
+) -> tuple[np.ndarray, np.ndarray]:
     """Roll a Markov model forward: truth ``(K, *b, n)`` and measurements ``(K, *b, m)``.
 
     Draw order per run and step: process noise, then measurement noise.
+
+    Parameters
+    ----------
+    motion
+        A motion model with ``sample(x, k, rng)`` (the next state, drawn).
+    measurement
+        A measurement model with ``sample(x, k, rng)`` (a noisy measurement).
+    x0
+        ``(*b, n)`` initial states (step 0; not part of the output).
+    steps
+        Number of steps K; the steps are numbered ``k = 1 .. K``.
+    rng
+        A Generator, or :class:`pursuit.RunStreams` with one stream per
+        entry of the leading batch axis (then run i's draws come from its
+        own stream).
+
+    Returns
+    -------
+    truth, measurements
+        ``(K, *b, n)`` states and ``(K, *b, m)`` measurements at steps 1..K.
+
+    Raises
+    ------
+    ValueError
+        If ``steps`` is not a positive integer.
     """
+    steps = positive_int("steps", steps)
     x = np.asarray(x0, dtype=float)
     truth = np.empty((steps, *x.shape))
     zs = None

@@ -82,6 +82,11 @@ class LinearCV:
         return tuple(lbl for a in axes for lbl in (a, f"v{a}"))
 
     @property
+    def state_units(self) -> tuple[str, ...]:
+        """``("m", "m/s", ...)``: metres and metres per second on every axis."""
+        return ("m", "m/s") * self.ndim
+
+    @property
     def position_indices(self) -> tuple[int, ...]:
         """Position components."""
         return self.motion.position_indices

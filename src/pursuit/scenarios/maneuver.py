@@ -255,6 +255,11 @@ class ManeuveringTarget:
         return tuple(lbl for a in self.axes for lbl in (a, f"v{a}", f"a{a}"))
 
     @property
+    def state_units(self) -> tuple[str, ...]:
+        """``("m", "m/s", "m/s²", ...)`` per axis."""
+        return ("m", "m/s", "m/s²") * len(self.axes)
+
+    @property
     def position_indices(self) -> tuple[int, ...]:
         """Positions in the state."""
         return tuple(3 * i for i in range(len(self.axes)))

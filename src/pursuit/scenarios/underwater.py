@@ -153,6 +153,11 @@ class UnderwaterTOA:
         """``("x", "y", "vx", "vy")`` or ``("x", "y")``."""
         return ("x", "y", "vx", "vy") if self.state == "cv" else ("x", "y")
 
+    @property
+    def state_units(self) -> tuple[str, ...]:
+        """Metres for positions, metres per second for velocities."""
+        return ("m", "m", "m/s", "m/s") if self.state == "cv" else ("m", "m")
+
     position_indices = (0, 1)
 
     @property

@@ -49,6 +49,7 @@ class UNGM:
     measurement: UNGMMeasurement = field(init=False, repr=False)
 
     state_labels = ("x",)
+    state_units = ("",)  # the UNGM benchmark's state is dimensionless
     position_indices: tuple[int, ...] = ()
     velocity_indices: tuple[int, ...] = ()
     dt = 1.0

@@ -78,6 +78,7 @@ class WSNRange:
         object.__setattr__(self, "_measurement", RangeSensors(self.anchors, self.sigma, (0, 2)))
 
     state_labels = ("x", "vx", "y", "vy")
+    state_units = ("m", "m/s", "m", "m/s")
     position_indices = (0, 2)
     velocity_indices = (1, 3)
 
