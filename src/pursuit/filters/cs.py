@@ -22,6 +22,9 @@ cover all axes together, S being diagonal):
     APCS only: the detection flag and D = ν²/S of the nominal prediction.
 ``gated`` (*b,)
     True where the χ² gate (``gate=p``) rejected the step's measurement.
+``repaired`` (*b,)
+    Always False: these filters factorise no covariance, so there is
+    nothing to repair (the key is there for uniformity).
 
 **Gating.**  With ``gate=p`` a step whose NIS (summed over the measured
 axes) exceeds the χ²(dof) quantile ``p``, dof the number of measured axes,
@@ -275,6 +278,7 @@ class _AxisFilter:
         info["alpha"] = np.broadcast_to(pred.alpha, (*batch, self.axes))
         info["sigma_a2"] = np.broadcast_to(pred.sigma2, (*batch, self.axes))
         info["gated"] = gated
+        info["repaired"] = np.zeros(batch, dtype=bool)  # nothing here factorises a covariance
         info.update(pred.info)
         info["pred_mean"] = pred_mean
         info["pred_cov"] = pred_cov
@@ -432,7 +436,7 @@ class AdaptiveCSFilter(_AxisFilter):
        ``P⁻ = λ F(α) P F(α)ᵀ + Q(α, σ_a²)`` and the Kalman update.
     4. σ_a² for the next step from the displacement correction
        ``Δx = x̂(k|k)_p − x̂(k|k−1)_p``: ``(4 − π)/π (2Δx/T²)²`` clipped to
-       ``[σ_min², σ_max²]``.  The STF memory V is updated every step.
+       ``[σ_min², σ_max²]``.  The STF memory V is updated every measured step.
 
     Parameters
     ----------

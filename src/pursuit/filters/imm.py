@@ -27,7 +27,7 @@ probabilities, ``innovation = Σ c̄_j ν_j`` (= z − Σ c̄_j ẑ_j) and
 ``mode_probs`` (*b, r) (μ after the update), ``mode_loglik`` (*b, r),
 ``mode_nis`` (*b, r) (each mode's NIS from its mixed prior),
 ``loglik_mixture`` = log Σ_j c̄_j Λ_j, the exact IMM likelihood of the step,
-and ``gated`` (*b,).
+``gated`` (*b,) and ``repaired`` (*b,) (a mode repaired a covariance).
 
 **Gating** (``gate=p``).  The validation region is the union of the modes'
 χ² gates [LIT, Bar-Shalom & Li]: a measurement is rejected only where
@@ -319,6 +319,7 @@ class InteractingMultipleModel:
 
         gated = np.zeros(batch, dtype=bool)
         used_ll = mode_ll
+        mode_infos = list(infos)
         if self.gate is not None:
             dof = np.broadcast_to(infos[0]["dof"], batch)  # the same measured components in every mode
             m = np.shape(infos[0]["innovation"])[-1]
@@ -328,6 +329,7 @@ class InteractingMultipleModel:
                 zb = np.broadcast_to(np.asarray(z, dtype=float), (*batch, m))
                 new_states, kept = self._step_modes(mixed, np.where(gated[..., None], np.nan, zb), k, dt)
                 used_ll = np.stack([np.broadcast_to(i["loglik"], batch) for i in kept], axis=-1)
+                mode_infos += kept
 
         with np.errstate(divide="ignore"):
             log_prior = np.log(c_bar)
@@ -346,6 +348,10 @@ class InteractingMultipleModel:
         info["mode_nis"] = mode_nis
         info["loglik_mixture"] = loglik_mixture
         info["gated"] = gated
+        info["repaired"] = np.zeros(batch, dtype=bool)
+        for i in mode_infos:
+            if "repaired" in i:
+                info["repaired"] = info["repaired"] | np.broadcast_to(i["repaired"], batch)
         return IMMState(mean, cov, k, tuple(new_states), probs), info
 
     def _step_modes(self, mixed, z, k, dt):
