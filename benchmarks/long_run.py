@@ -1,6 +1,11 @@
 """One single run of 10^6 steps per Gaussian filter on the hard long scenario.
 
-    python benchmarks/long_run.py [FILTER ...]     (from the repository root; default: all four)
+    python benchmarks/long_run.py [FILTER ...]     (from the repository root; default: all)
+
+FILTER is kf, ekf, ukf, ckf (the hard long scenario) or one of the maneuvering-target
+filters cs, apcs, ms, kf-singer, imm-singer (the long maneuvering scenario of
+tests/filters/test_robustness.py: a 3-D maneuvering path at 200 km sampled every second,
+1 mm fixes, 20 % missing components and 100 s outages).
 
 The test suite checks 10^6 filter steps per filter as 200 runs x 5000 steps
 (tests/filters/test_robustness.py), which costs seconds; this script runs the
@@ -24,7 +29,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import pursuit as pu  # noqa: E402
-from tests.filters.test_robustness import long_scenario  # noqa: E402
+from tests.filters.test_robustness import MANEUVER_FILTERS, long_maneuver_scenario, long_scenario  # noqa: E402
 
 FILTERS = {
     "kf": (pu.KalmanFilter, "position"),
@@ -42,8 +47,43 @@ def _factors(c: np.ndarray) -> bool:
         return False
 
 
+def maneuver_run(name: str, steps: int = 10**6) -> None:
+    """One run of ``steps`` steps of a maneuvering-target filter on the long maneuvering scenario."""
+    meas, z, dts, prior = long_maneuver_scenario(runs=1, steps=steps)
+    filt = MANEUVER_FILTERS[name](meas)
+    state = filt.init(prior, (1,))
+    n = prior.dim
+    covs = np.empty((1000, 1, n, n))
+    repaired = not_pd = 0
+    finite = True
+    worst = np.inf
+    t0 = time.perf_counter()
+    for i in range(z.shape[0]):
+        state, info = filt.step(state, z[i], dt=float(dts[i]))
+        repaired += int(np.count_nonzero(info["repaired"]))
+        covs[i % 1000] = state.cov
+        if i % 1000 == 999 or i == z.shape[0] - 1:
+            block = covs[: i % 1000 + 1]
+            finite &= bool(np.all(np.isfinite(block)) and np.all(np.isfinite(state.mean)))
+            w = np.linalg.eigvalsh(block)
+            worst = min(worst, float(np.min(w[..., 0] / w[..., -1])))
+            try:
+                np.linalg.cholesky(block)
+            except np.linalg.LinAlgError:
+                not_pd += sum(1 for c in block.reshape(-1, n, n) if not _factors(c))
+    wall = time.perf_counter() - t0
+    print(
+        f"{name} (maneuver): {z.shape[0]} steps in one run, {wall:.0f} s, repaired={repaired}, "
+        f"cholesky_failures={not_pd}, all_finite={finite}, min_eig_ratio={worst:.3g}",
+        flush=True,
+    )
+
+
 def main(names: list[str]) -> int:
-    for name in names or list(FILTERS):
+    for name in names or [*FILTERS, *MANEUVER_FILTERS]:
+        if name in MANEUVER_FILTERS:
+            maneuver_run(name)
+            continue
         cls, sensor = FILTERS[name]
         motion, meas, z, dts, prior = long_scenario(sensor, runs=1, steps=10**6)
         filt = cls(motion, meas)

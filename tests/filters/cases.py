@@ -103,6 +103,17 @@ CASES = [
         scenario=MANEUVER,
     ),
     Case("imm-cv-singer", _imm_cv_singer, exact_on_linear=False, scenario=MANEUVER),
+    # χ² gates on the per-axis filters and on the IMM (a step with a rejected run re-runs the IMM's
+    # modes for the whole batch: the other runs must not notice).  APCS and IMM-Singer adapt to
+    # this scenario's maneuver, so only a tight gate (0.7) rejects some of their steps here.
+    Case("cs-gated", lambda s: CurrentStatisticalFilter(s.measurement, dt=s.dt, gate=0.9), exact_on_linear=False, scenario=MANEUVER),
+    Case("apcs-gated", lambda s: AdaptiveCSFilter(s.measurement, dt=s.dt, gate=0.7), exact_on_linear=False, scenario=MANEUVER),
+    Case(
+        "imm-singer-gated",
+        lambda s: InteractingMultipleModel([_singer_kf(s, a, q) for a, q in ((1 / 60, 5.0), (1 / 20, 20.0), (1 / 5, 60.0))], 0.95, gate=0.7),
+        exact_on_linear=False,
+        scenario=MANEUVER,
+    ),
     # adaptive fading strategies (paper P2 and the strong tracking filter): λ can exceed 1
     Case("kf-ewfmkf", lambda s: pu.KalmanFilter(s.motion, s.measurement, fading=pu.ExponentiallyWeighted()), exact_on_linear=False),
     Case("ekf-ewfmkf", lambda s: pu.ExtendedKalmanFilter(s.motion, s.measurement, fading=pu.ExponentiallyWeighted(b=0.9)), exact_on_linear=False),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy import stats
+from scipy.special import gammaln
 
 import pursuit as pu
 from pursuit.filters import AdaptiveCSFilter, CurrentStatisticalFilter, ModifiedSingerFilter
@@ -183,6 +184,104 @@ def test_apcs_detects_the_onset_of_strong_maneuvers():
         assert hits > stats.binom.ppf(1 - 1e-9, 2 * runs, 3 * p)
 
 
+def _apcs_reference(sim, run, axis, *, alpha0, a_max, M, rho, beta_s, alpha_cap, sigma_min, sigma_max, T=1.0, r=20.0):
+    """Spec 04 §2.5 for one axis, written out with scalars: per-step mean, cov, λ, α, σ_a², D."""
+    H = np.array([1.0, 0.0, 0.0])
+    c = (4 - np.pi) / np.pi
+    clip = lambda v: min(max(v, sigma_min**2), np.inf if sigma_max is None else sigma_max**2)  # noqa: E731
+    sl = slice(3 * axis, 3 * axis + 3)
+    x = sim.prior.mean[run, sl].copy()
+    P = sim.prior.cov[sl, sl].copy()
+    s2 = clip(cs_variance(x[2], a_max))  # start-up: eq. (14) at â(0|0)
+    V = None
+    F0, q0 = exp_correlated_transition(3, alpha0, T), exp_correlated_noise(3, alpha0, T)
+    out = {key: [] for key in ("mean", "cov", "lam", "alpha", "sigma2", "D", "nu", "S0", "V", "FPF0")}
+    for k in range(sim.measurements.shape[0]):
+        z = sim.measurements[k, run, axis]
+        # ① ā = â(k|k): the prediction is the constant-acceleration extrapolation for every α
+        x_pred = np.array([x[0] + x[1] * T + x[2] * T * T / 2, x[1] + x[2] * T, x[2]])
+        # ② nominal prediction (α0, λ = 1) and the detection statistic
+        FPF0 = F0 @ P @ F0.T
+        Q0 = 2 * alpha0 * s2 * q0
+        nu = z - x_pred[0]
+        D = nu * nu / ((FPF0 + Q0)[0, 0] + r)
+        V = nu * nu if V is None else (rho * V + nu * nu) / (1 + rho)  # STF memory, every step
+        # ③ decide: strong-tracking λ and raised α only when D > M
+        if D > M:
+            lam = max(1.0, (V - Q0[0, 0] - beta_s * r) / FPF0[0, 0])
+            alpha = min(alpha0 * D / M, alpha_cap)
+        else:
+            lam, alpha = 1.0, alpha0
+        F = exp_correlated_transition(3, alpha, T)
+        P_pred = lam * F @ P @ F.T + 2 * alpha * s2 * exp_correlated_noise(3, alpha, T)
+        S = H @ P_pred @ H + r
+        K = P_pred @ H / S
+        x = x_pred + K * nu
+        A = np.eye(3) - np.outer(K, H)
+        P = A @ P_pred @ A.T + r * np.outer(K, K)
+        for key, v in zip(out, (x, P, lam, alpha, s2, D, nu, (FPF0 + Q0)[0, 0] + r, V, FPF0[0, 0])):
+            out[key].append(v)
+        # ④ σ_a² for the next step from the displacement correction
+        s2 = clip(c * (2 * (x[0] - x_pred[0]) / T**2) ** 2)
+    return {key: np.array(v) for key, v in out.items()}
+
+
+def _assert_within(actual, desired, bound):
+    err = np.abs(actual - desired)
+    assert np.all(err <= bound), f"largest error {np.max(err):.3g} at {np.argmax(err - bound)}, bound there {bound.flat[np.argmax(err - bound)]:.3g}"
+
+
+@pytest.mark.parametrize(
+    "config",
+    [
+        dict(),  # paper P4's filter: α0 = 0.001, M = 3, ρ = 0.95, β_s = 1, α_cap = 1, σ_min = 0.1
+        # a low threshold and a large β_s reach λ's floor of 1 on a detection; α's cap and σ_max bind
+        dict(alpha0=0.05, threshold=1.5, rho=0.9, beta_s=2.0, alpha_cap=0.2, sigma_min=0.5, sigma_max=25.0),
+    ],
+    ids=["p4", "floor-cap-clip"],
+)
+def test_apcs_matches_a_plain_reimplementation_of_the_detection_branch(config):
+    sim = _sim(SCENARIO, 3, seed=11)
+    filt = AdaptiveCSFilter(SCENARIO.measurement, **config)
+    track = _run(filt, sim)
+    info = track.info
+    params = dict(
+        alpha0=filt.alpha0, a_max=filt.a_max, M=filt.threshold, rho=filt.rho, beta_s=filt.beta_s,
+        alpha_cap=filt.alpha_cap, sigma_min=filt.sigma_min, sigma_max=filt.sigma_max,
+    )
+    # The two compute the same formulas in different orders.  The one ill-conditioned operation is
+    # ν = z − x⁻, which cancels positions of 2e5 m: every quantity inherits an absolute error of a few
+    # ulps of 2e5 m in ν (dnu below, 2.9e-10 m), propagated to first order; the rest is relative
+    # round-off (rel).
+    dnu, rel, c = 10 * np.spacing(2e5), 1e-9, (4 - np.pi) / np.pi
+    branches = dict(faded=0, clipped=0, capped=0)
+    for run in range(3):
+        for axis in range(3):
+            sl = slice(3 * axis, 3 * axis + 3)
+            ref = _apcs_reference(sim, run, axis, **params)
+            D, lam, s2 = (info[key][:, run, axis] for key in ("maneuver_stat", "axis_fading", "sigma_a2"))
+            dD = 2 * np.abs(ref["nu"]) * dnu / ref["S0"]  # D = ν²/S0
+            _assert_within(D, ref["D"], rel * ref["D"] + dD)
+            np.testing.assert_array_equal(info["maneuver"][:, run, axis], ref["D"] > filt.threshold)
+            # λ = (V − Q0 − β_s r)/(F P Fᵀ)_pp, V a weighted mean of ν² (weights summing to 1): dV ≤ 2√V dν
+            _assert_within(lam, ref["lam"], rel * ref["lam"] + 2 * np.sqrt(ref["V"]) * dnu / ref["FPF0"])
+            _assert_within(info["alpha"][:, run, axis], ref["alpha"], rel * ref["alpha"] + filt.alpha0 / filt.threshold * dD)
+            # σ_a² = c (2Δx/T²)², Δx = K ν, K_p ≤ 1: dσ_a² ≤ 2 √(c σ_a²) (2/T²) dν
+            _assert_within(s2, ref["sigma2"], rel * ref["sigma2"] + 2 * np.sqrt(c * ref["sigma2"]) * 2 / SCENARIO.dt**2 * dnu)
+            np.testing.assert_allclose(track.mean[:, run, sl], ref["mean"], rtol=1e-10, atol=dnu)
+            np.testing.assert_allclose(track.cov[:, run, sl, sl], ref["cov"], rtol=1e-8)
+            detect = ref["D"] > filt.threshold
+            branches["faded"] += int(np.sum(detect & (ref["lam"] > 1)))
+            branches["clipped"] += int(np.sum(detect & (ref["lam"] == 1)))
+            branches["capped"] += int(np.sum(ref["alpha"] == filt.alpha_cap))
+    # The detection branch is exercised.  With P4's values λ's floor is out of reach: D > M gives
+    # V ≥ ν²/(1 + ρ) > M/(1 + ρ) (F P Fᵀ + Q0 + r)_pp, so with M ≥ 1 + ρ and β_s = 1, N > (F P Fᵀ)_pp.
+    assert branches["faded"] > 0, branches
+    if config:
+        assert branches["clipped"] > 0 and branches["capped"] > 0, branches
+        assert np.any(info["sigma_a2"] == filt.sigma_max**2) and np.any(info["sigma_a2"] == filt.sigma_min**2)
+
+
 def test_a_missing_axis_keeps_its_adaptive_memory():
     sim = _sim(SCENARIO, 3)
     zs = sim.measurements.copy()
@@ -204,6 +303,35 @@ def test_apcs_beats_cs_on_the_maneuvering_axis():
     d = rms["CS"] - rms["APCS"]
     z = d.mean(axis=0) / (d.std(axis=0, ddof=1) / np.sqrt(runs))
     assert np.all(z > 5), z
+
+
+def test_apcs_and_cs_agree_before_the_first_maneuver_within_the_band_of_filters_that_track_well():
+    # Spec 04 §3: "on maneuver-free segments the two are within a tolerance".  Before the first
+    # maneuver (t < 21 s) the truth is a straight line on every axis.  A filter tracks well there when
+    # its position error is below the raw measurements' (σ_z: no filtering at all), and no unbiased
+    # filter can beat the best linear unbiased estimator, least squares through every measurement so
+    # far (Gauss-Markov): with n measurements its error variance at the last one is
+    # σ_z² (4n − 2)/(n(n + 1)).  Two filters that track well differ by less than the width of that
+    # band, which is the tolerance.  Per-run RMSE over the segment's steps and axes, paired over runs.
+    runs = 100
+    sim = _sim(SCENARIO, runs, seed=4321)
+    before = SCENARIO.times < min(m.start for m in SCENARIO.maneuvers)
+    assert not SCENARIO.maneuvering()[before].any()
+    sigma = np.sqrt(SCENARIO.R)
+    n = SCENARIO.times[before] / SCENARIO.dt  # measurements so far (t = T, 2T, ..., t_k)
+    blue = sigma * np.sqrt(np.mean((4 * n - 2) / (n * (n + 1))))  # pooled RMSE of the BLUE
+    cells = before.sum() * 3
+    raw = sigma * np.sqrt(2 / cells) * np.exp(gammaln((cells + 1) / 2) - gammaln(cells / 2))  # E per-run RMSE of z
+    tolerance = raw - blue  # 4.45 − 2.72 = 1.73 m
+    rms = {}
+    for filt in (CurrentStatisticalFilter(SCENARIO.measurement), AdaptiveCSFilter(SCENARIO.measurement)):
+        e = (_run(filt, sim).mean - sim.truth)[before][..., [0, 3, 6]]
+        rms[filt.name] = np.sqrt(np.mean(e**2, axis=(0, 2)))  # (runs,)
+    se = lambda v: v.std(ddof=1) / np.sqrt(runs)  # noqa: E731
+    for name, r in rms.items():  # both track well: better than the raw measurements
+        assert r.mean() + 3 * se(r) < raw, (name, r.mean(), raw)
+    d = rms["CS"] - rms["APCS"]
+    assert abs(d.mean()) + 3 * se(d) < tolerance, (d.mean(), se(d), tolerance)
 
 
 def test_chi2_threshold():

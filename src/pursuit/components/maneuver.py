@@ -22,7 +22,7 @@ from ..models import maneuver as mm
 from ..registry import Param, register
 from ..scenarios.maneuver import DEFAULT_SCHEDULE, ManeuveringTarget, parse_schedule
 from .experiments import build_filter
-from .filters import NAME
+from .filters import GATE, NAME
 
 # --------------------------------------------------------------------------
 # models (listed by `pursuit list models`)
@@ -102,6 +102,7 @@ _CS_PARAMS = (
     Param("a_neg_max", "float", None, "negative acceleration limit (magnitude); default a_max"),
     Param("sigma_min", "float", 0.0, "floor on sigma_a, m/s^2"),
     Param("mean", "str", "current", "current: a_bar = a(k|k) (CS); zero: Singer prediction", choices=("current", "zero")),
+    GATE,
 )
 
 
@@ -132,6 +133,7 @@ def _cs(scenario, where="filter", name=None, **kw):
         Param("alpha_rule", "str", "ratio", "alpha on detection: alpha0*D/M, lambda*alpha0 or unchanged", choices=("ratio", "fading", "none")),
         Param("alpha_cap", "float", 1.0, "upper limit of alpha, 1/s"),
         Param("mean", "str", "current", "current (CS) or zero (Singer prediction)", choices=("current", "zero")),
+        GATE,
     ),
 )
 def _apcs(scenario, where="filter", name=None, **kw):
@@ -151,6 +153,7 @@ def _apcs(scenario, where="filter", name=None, **kw):
         Param("tau_min", "float", 1.0, "shortest maneuver time constant, s"),
         Param("sigma_min", "float", 0.1, "floor on sigma_m, m/s^2"),
         Param("forgetting", "float", None, "forgetting factor of the running averages (default: 1/k averaging)"),
+        GATE,
     ),
 )
 def _ms(scenario, where="filter", name=None, **kw):
@@ -176,14 +179,25 @@ _SINGER_PARAMS = (
 )
 
 
-@register("filter", "singer", "Kalman filter with the Singer model on every axis", params=(NAME, *_SINGER_PARAMS))
-def _singer(scenario, where="filter", name=None, alpha=0.05, sigma=None, a_max=100.0, p_max=0.1, p_zero=0.5):
+@register("filter", "singer", "Kalman filter with the Singer model on every axis", params=(NAME, *_SINGER_PARAMS, GATE))
+def _singer(scenario, where="filter", name=None, alpha=0.05, sigma=None, a_max=100.0, p_max=0.1, p_zero=0.5, gate=None):
     axes = _axes_of(scenario, where)
     s = _singer_sigma(where, sigma, a_max, p_max, p_zero)
     return _reanchor(
         where,
-        lambda: KalmanFilter(mm.Singer(alpha=alpha, sigma=s, ndim=axes, dt=scenario.dt), scenario.measurement, name=name or "Singer"),
+        lambda: KalmanFilter(
+            mm.Singer(alpha=alpha, sigma=s, ndim=axes, dt=scenario.dt), scenario.measurement, name=name or "Singer", gate=gate
+        ),
     )
+
+
+IMM_GATE = Param(
+    "gate",
+    "float",
+    None,
+    "chi-square gate probability: reject a measurement outside every mode's gate (NIS above this quantile in all modes; default: no gate)",
+    check=GATE.check,
+)
 
 
 def _transition(field: str, value: Any):
@@ -201,9 +215,10 @@ def _transition(field: str, value: Any):
         Param("models", "matrix", [[1 / 60, 5.0], [1 / 20, 20.0], [1 / 5, 60.0]], "one [alpha (1/s), sigma (m/s^2)] row per model"),
         Param("transition", "any", 0.95, "staying probability p_ii, or the full Markov matrix", check=_transition),
         Param("initial_probs", "vector", None, "initial mode probabilities (default uniform)"),
+        IMM_GATE,
     ),
 )
-def _imm_singer(scenario, where="filter", name=None, models=None, transition=0.95, initial_probs=None):
+def _imm_singer(scenario, where="filter", name=None, models=None, transition=0.95, initial_probs=None, gate=None):
     axes = _axes_of(scenario, where)
     rows = np.atleast_2d(np.asarray(models, dtype=float))
     if rows.ndim != 2 or rows.shape[1] != 2:
@@ -212,7 +227,7 @@ def _imm_singer(scenario, where="filter", name=None, models=None, transition=0.9
     for i, (a, s) in enumerate(rows):
         model = _reanchor(f"{where}.models[{i}]", lambda: mm.Singer(alpha=a, sigma=s, ndim=axes, dt=scenario.dt))
         filters.append(KalmanFilter(model, scenario.measurement, name=f"Singer({a:g},{s:g})"))
-    return _reanchor(where, lambda: InteractingMultipleModel(filters, transition, initial_probs, name=name or "IMM-Singer"))
+    return _reanchor(where, lambda: InteractingMultipleModel(filters, transition, initial_probs, name=name or "IMM-Singer", gate=gate))
 
 
 @register(
@@ -224,10 +239,11 @@ def _imm_singer(scenario, where="filter", name=None, models=None, transition=0.9
         Param("models", "any", registry.REQUIRED, "list of filter tables {type = ..., ...}"),
         Param("transition", "any", 0.95, "staying probability p_ii, or the full Markov matrix", check=_transition),
         Param("initial_probs", "vector", None, "initial mode probabilities (default uniform)"),
+        IMM_GATE,
     ),
 )
-def _imm(scenario, where="filter", name=None, models=None, transition=0.95, initial_probs=None):
+def _imm(scenario, where="filter", name=None, models=None, transition=0.95, initial_probs=None, gate=None):
     if not isinstance(models, list) or not models or not all(isinstance(m, dict) for m in models):
         raise ValueError(f"{where}.models: expected a list of filter tables")
     filters = [build_filter(entry, scenario, f"{where}.models[{i}]") for i, entry in enumerate(models)]
-    return _reanchor(where, lambda: InteractingMultipleModel(filters, transition, initial_probs, name=name or "IMM"))
+    return _reanchor(where, lambda: InteractingMultipleModel(filters, transition, initial_probs, name=name or "IMM", gate=gate))

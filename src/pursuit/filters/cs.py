@@ -20,6 +20,24 @@ cover all axes together, S being diagonal):
     Acceleration variance used in Q.
 ``maneuver``, ``maneuver_stat`` (*b, A)
     APCS only: the detection flag and D = ν²/S of the nominal prediction.
+``gated`` (*b,)
+    True where the χ² gate (``gate=p``) rejected the step's measurement.
+``repaired`` (*b,)
+    Always False: these filters factorise no covariance, so there is
+    nothing to repair (the key is there for uniformity).
+
+**Gating.**  With ``gate=p`` a step whose NIS (summed over the measured
+axes) exceeds the χ²(dof) quantile ``p``, dof the number of measured axes,
+is not used: as in every Gaussian filter the estimate is the prediction
+(``pred_mean``, ``pred_cov``) and ``innovation``, ``S``, ``nis``, ``dof``,
+``loglik`` describe the rejected measurement.  The adaptive quantities learn
+nothing from it: APCS keeps its σ_a² and strong-tracking memory V, MS its
+autocorrelations, as for a missing measurement.  The gate acts on the
+innovation of the prediction actually used, after APCS's adaptation: on a
+detected axis the strong-tracking λ makes S about as large as the memory V,
+which has just taken in ν², so that axis's NIS stays below about 1 + ρ and
+the gate rejects little there (an outlier and a maneuver onset look the same
+in one step).
 
 The CS prediction ``F x + U ā`` with ā = â(k|k) is exactly the
 constant-acceleration extrapolation, while the covariance is propagated with
@@ -45,6 +63,7 @@ from ..models.maneuver import (
     exp_correlated_transition,
 )
 from ..rng import RNGLike
+from .gating import chi2_gate_thresholds
 from .gaussian import linear_update
 
 __all__ = [
@@ -134,9 +153,12 @@ class _AxisFilter:
     measurement: Any
     dt: float = 1.0
     name: str = ""
+    gate: float | None = field(default=None, kw_only=True)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "dt", positive("dt", self.dt))
+        if self.gate is not None:
+            object.__setattr__(self, "gate", in_range("gate", self.gate, 0.0, 1.0, low_open=True, high_open=True))
         matrix = getattr(self.measurement, "matrix", None)
         if not callable(matrix) or not callable(getattr(self.measurement, "cov", None)):
             raise TypeError(
@@ -238,16 +260,25 @@ class _AxisFilter:
 
         pred = self._predict(state.memory, x, P, z, measured, r, T)
         x_upd, P_upd, ainfo = linear_update(pred.mean, pred.cov, za, _H_AXIS, _AxisNoise(r[:, None, None]), k)
-        memory = self._learn(pred.memory, x, pred.mean, x_upd, measured, T)
+        info = _combine_axes(ainfo, batch)
+        gated = np.zeros(batch, dtype=bool)
+        if self.gate is not None:
+            thresholds = chi2_gate_thresholds(self.gate, self.axes)
+            gated = np.asarray(info["nis"] > thresholds[info["dof"]])  # NaN NIS (nothing measured) is never gated
+            if gated.any():
+                x_upd = np.where(gated[..., None, None], pred.mean, x_upd)
+                P_upd = np.where(gated[..., None, None, None], pred.cov, P_upd)
+        memory = self._learn(pred.memory, x, pred.mean, x_upd, measured & ~gated[..., None], T)
 
         mean, cov = self._join(x_upd, P_upd)
-        info = _combine_axes(ainfo, batch)
         pred_mean, pred_cov = self._join(pred.mean, pred.cov)
         lam = np.broadcast_to(pred.lam, (*batch, self.axes))
         info["fading"] = lam.max(axis=-1)
         info["axis_fading"] = lam
         info["alpha"] = np.broadcast_to(pred.alpha, (*batch, self.axes))
         info["sigma_a2"] = np.broadcast_to(pred.sigma2, (*batch, self.axes))
+        info["gated"] = gated
+        info["repaired"] = np.zeros(batch, dtype=bool)  # nothing here factorises a covariance
         info.update(pred.info)
         info["pred_mean"] = pred_mean
         info["pred_cov"] = pred_cov
@@ -262,6 +293,7 @@ class _AxisFilter:
         raise NotImplementedError
 
     def _learn(self, memory, x_prev, x_pred, x_upd, measured, T) -> dict[str, np.ndarray]:
+        """Memory for the next step; ``measured`` (*b, A) is False where the axis had no (accepted) measurement."""
         return memory
 
 
@@ -350,6 +382,10 @@ class CurrentStatisticalFilter(_AxisFilter):
         Singer filter with the CS variance).
     name
         Label in results.
+    gate
+        χ² gate probability in (0, 1), keyword only: a step whose NIS
+        exceeds the χ²(dof) quantile ``gate`` only predicts and is flagged
+        in ``gated`` (see the module notes).  Default: no gate.
     """
 
     alpha: float = 0.001
@@ -400,11 +436,11 @@ class AdaptiveCSFilter(_AxisFilter):
        ``P⁻ = λ F(α) P F(α)ᵀ + Q(α, σ_a²)`` and the Kalman update.
     4. σ_a² for the next step from the displacement correction
        ``Δx = x̂(k|k)_p − x̂(k|k−1)_p``: ``(4 − π)/π (2Δx/T²)²`` clipped to
-       ``[σ_min², σ_max²]``.  The STF memory V is updated every step.
+       ``[σ_min², σ_max²]``.  The STF memory V is updated every measured step.
 
     Parameters
     ----------
-    measurement, dt, name
+    measurement, dt, name, gate
         As :class:`CurrentStatisticalFilter`.
     alpha0
         Maneuver frequency without a maneuver (paper: 0.001 1/s).
@@ -506,7 +542,8 @@ class AdaptiveCSFilter(_AxisFilter):
         D = np.where(measured, nu * nu / (P0[..., 0, 0] + r), np.nan)
         detect = measured & (D > self.threshold)
 
-        # Strong-tracking memory V of ν², kept every measured step.
+        # Strong-tracking memory V of ν², kept every measured step (stored by _learn, so that a
+        # measurement the gate rejects leaves no trace).
         V_old = memory["V"]
         V = np.where(np.isnan(V_old), nu * nu, (self.rho * V_old + nu * nu) / (1.0 + self.rho))
         V = np.where(measured, V, V_old)
@@ -528,20 +565,21 @@ class AdaptiveCSFilter(_AxisFilter):
 
         F, U, q = _matrices_for(alpha, T)
         x_pred, P_pred, _, _ = _propagate(F, U, q, x, P, a_bar, sigma2, alpha, lam)
-        memory = {**memory, "V": V}
+        memory = {**memory, "V_step": V}
         info = {"maneuver": detect, "maneuver_stat": D}
         return _AxisPrediction(x_pred, P_pred, F, lam, alpha, sigma2, memory, info)
 
     def _learn(self, memory, x_prev, x_pred, x_upd, measured, T):
+        V = np.where(measured, memory["V_step"], memory["V"])
         if self.variance in ("rayleigh", "fixed"):
-            return memory
+            return {"sigma2": memory["sigma2"], "V": V}
         da = 2.0 * (x_upd[..., 0] - x_pred[..., 0]) / (T * T)
         if self.variance == "displacement":
             s2 = CS_VARIANCE_FACTOR * da * da
         else:
             s2 = self.c_a * np.abs(da)
         s2 = np.where(measured, self._clip(s2), memory["sigma2"])
-        return {**memory, "sigma2": s2}
+        return {"sigma2": s2, "V": V}
 
 
 # --------------------------------------------------------------------------
@@ -563,7 +601,7 @@ class ModifiedSingerFilter(_AxisFilter):
 
     Parameters
     ----------
-    measurement, dt, name
+    measurement, dt, name, gate
         As :class:`CurrentStatisticalFilter`.
     alpha_init, sigma_init
         Singer parameters before the estimates are used (1/s, m/s²).

@@ -24,20 +24,38 @@ moment-matched: with ν_j the mode innovations and c̄_j the predicted mode
 probabilities, ``innovation = Σ c̄_j ν_j`` (= z − Σ c̄_j ẑ_j) and
 ``S = Σ c̄_j [S_j + (ν_j − ν)(ν_j − ν)ᵀ]``; ``nis`` and ``loglik`` are
 νᵀS⁻¹ν and log N(ν; 0, S) of that Gaussian, as in every filter.  Extra:
-``mode_probs`` (*b, r) (μ after the update), ``mode_loglik`` (*b, r) and
-``loglik_mixture`` = log Σ_j c̄_j Λ_j, the exact IMM likelihood of the step.
+``mode_probs`` (*b, r) (μ after the update), ``mode_loglik`` (*b, r),
+``mode_nis`` (*b, r) (each mode's NIS from its mixed prior),
+``loglik_mixture`` = log Σ_j c̄_j Λ_j, the exact IMM likelihood of the step,
+``gated`` (*b,) and ``repaired`` (*b,) (a mode repaired a covariance).
+
+**Gating** (``gate=p``).  The validation region is the union of the modes'
+χ² gates [LIT, Bar-Shalom & Li]: a measurement is rejected only where
+*every* mode's NIS exceeds the χ²(dof) quantile ``p``.  So a correct
+measurement is rejected with probability at most 1 − p whichever mode is
+true, and a maneuver onset that only an unlikely maneuvering mode explains
+is kept, where a gate on the moment-matched mixture (whose S is far too
+small for that mode) would reject it and keep the IMM from switching.  A
+rejected step is exactly a step without the measurement: every mode only
+predicts from its mixed prior and μ = c̄, while ``innovation``, ``S``,
+``nis``, ``dof``, ``loglik``, ``mode_loglik``, ``mode_nis`` and
+``loglik_mixture`` describe the rejected measurement.  (A step where some
+run is rejected runs the modes a second time, with the rejected runs'
+measurements set missing.)  Mode filters may carry gates of their own.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any, Sequence
 
 import numpy as np
 
 from .._linalg import inv_spd, logdet_spd, quad, symmetrize
+from .._validation import in_range
 from ..gaussian import Gaussian
 from ..rng import RNGLike
+from .gating import chi2_gate_thresholds
 
 __all__ = ["StateMap", "IMMState", "InteractingMultipleModel", "kinematic_map"]
 
@@ -182,6 +200,10 @@ class InteractingMultipleModel:
         all identity (every mode has the common state).
     name
         Label in results.
+    gate
+        χ² gate probability in (0, 1), keyword only: a measurement outside
+        every mode's gate is not used (see the module notes) and the step
+        is flagged in ``gated``.  Default: no gate.
     """
 
     filters: Sequence[Any]
@@ -189,6 +211,7 @@ class InteractingMultipleModel:
     initial_probs: Any = None
     maps: Sequence[StateMap | None] | None = None
     name: str = "IMM"
+    gate: float | None = field(default=None, kw_only=True)
 
     def __post_init__(self) -> None:
         filters = tuple(self.filters)
@@ -221,6 +244,8 @@ class InteractingMultipleModel:
         object.__setattr__(self, "maps", maps)
         if not self.name:
             object.__setattr__(self, "name", "IMM")
+        if self.gate is not None:
+            object.__setattr__(self, "gate", in_range("gate", self.gate, 0.0, 1.0, low_open=True, high_open=True))
 
     @property
     def modes(self) -> int:
@@ -282,24 +307,35 @@ class InteractingMultipleModel:
         d = X[..., :, None, :] - x0[..., None, :, :]  # (*b, i, j, n)
         P0 = np.einsum("...ij,...inm->...jnm", w, P) + np.einsum("...ij,...ijn,...ijm->...jnm", w, d, d)
 
-        new_states, infos = [], []
-        for j, f in enumerate(self.filters):
+        mixed = []
+        for j in range(self.modes):
             # Contiguous copies keep einsum's summation order independent of the batch.
             xj = np.ascontiguousarray(x0[..., j, :])
             mj, cj = self._to_mode(j, xj, np.ascontiguousarray(symmetrize(P0[..., j, :, :])))
-            s, info = f.step(replace(state.modes[j], mean=mj, cov=cj), z, k=k, dt=dt)
-            new_states.append(s)
-            infos.append(info)
-
+            mixed.append(replace(state.modes[j], mean=mj, cov=cj))
+        new_states, infos = self._step_modes(mixed, z, k, dt)
         mode_ll = np.stack([np.broadcast_to(i["loglik"], batch) for i in infos], axis=-1)  # (*b, r)
+        mode_nis = np.stack([np.broadcast_to(i["nis"], batch) for i in infos], axis=-1)  # (*b, r)
+
+        gated = np.zeros(batch, dtype=bool)
+        used_ll = mode_ll
+        mode_infos = list(infos)
+        if self.gate is not None:
+            dof = np.broadcast_to(infos[0]["dof"], batch)  # the same measured components in every mode
+            m = np.shape(infos[0]["innovation"])[-1]
+            limit = chi2_gate_thresholds(self.gate, m)[dof]
+            gated = np.all(mode_nis > limit[..., None], axis=-1)  # NaN NIS (nothing measured) is never gated
+            if gated.any():
+                zb = np.broadcast_to(np.asarray(z, dtype=float), (*batch, m))
+                new_states, kept = self._step_modes(mixed, np.where(gated[..., None], np.nan, zb), k, dt)
+                used_ll = np.stack([np.broadcast_to(i["loglik"], batch) for i in kept], axis=-1)
+                mode_infos += kept
+
         with np.errstate(divide="ignore"):
             log_prior = np.log(c_bar)
-        log_post = log_prior + mode_ll
-        top = np.max(log_post, axis=-1, keepdims=True)
-        e = np.exp(log_post - top)
-        total = e.sum(axis=-1, keepdims=True)
-        probs = e / total
-        loglik_mixture = (top + np.log(total))[..., 0]
+        probs, loglik_mixture = _normalise(log_prior + used_ll)
+        if gated.any():  # the likelihood of the rejected measurement, as in the other keys
+            loglik_mixture = np.where(gated, _normalise(log_prior + mode_ll)[1], loglik_mixture)
 
         X, P = self._common(new_states)
         mean = np.einsum("...j,...jn->...n", probs, X)
@@ -309,8 +345,30 @@ class InteractingMultipleModel:
         info = _mixture_info(infos, c_bar, batch)
         info["mode_probs"] = probs
         info["mode_loglik"] = mode_ll
+        info["mode_nis"] = mode_nis
         info["loglik_mixture"] = loglik_mixture
+        info["gated"] = gated
+        info["repaired"] = np.zeros(batch, dtype=bool)
+        for i in mode_infos:
+            if "repaired" in i:
+                info["repaired"] = info["repaired"] | np.broadcast_to(i["repaired"], batch)
         return IMMState(mean, cov, k, tuple(new_states), probs), info
+
+    def _step_modes(self, mixed, z, k, dt):
+        states, infos = [], []
+        for f, s0 in zip(self.filters, mixed):
+            s, info = f.step(s0, z, k=k, dt=dt)
+            states.append(s)
+            infos.append(info)
+        return states, infos
+
+
+def _normalise(log_post: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Posterior probabilities and log Σ exp of unnormalised log-probabilities ``(*b, r)``."""
+    top = np.max(log_post, axis=-1, keepdims=True)
+    e = np.exp(log_post - top)
+    total = e.sum(axis=-1, keepdims=True)
+    return e / total, (top + np.log(total))[..., 0]
 
 
 def _mixture_info(infos: list[dict[str, np.ndarray]], c_bar: np.ndarray, batch: tuple[int, ...]) -> dict[str, np.ndarray]:

@@ -30,9 +30,10 @@ at z = −x, which are positive for every x ≥ 0:
   positive terms only and keep full relative accuracy.
 
 The tests check F, U and Q against numerical integration of the continuous
-model and against the closed forms evaluated in 50-digit arithmetic, to
-1e−10 relative for α from 1e−6 to 10 (and against the published Singer
-reference values).
+model and against the closed forms evaluated in high-precision decimal
+arithmetic (60 digits for Singer and CS, 80 for the Jerk model), to 1e−10
+relative for α from 1e−6 to 10 (and against the published Singer reference
+values).
 """
 
 from __future__ import annotations

@@ -171,7 +171,8 @@ class ManeuveringTarget:
     ----------
     horizon
         Number of measurement epochs t_1 … t_horizon, including the two
-        used for initialisation (paper: 100 steps).
+        used for initialisation (paper: N = 100 steps, read as 100 epochs,
+        so 98 filter steps).
     dt
         Sampling period T (s).
     position, velocity
