@@ -64,7 +64,13 @@ def _stf(**kw) -> StrongTracking:
         Param("gate_factor", "float", 10.0, "a residual above gate_factor * threshold is an outlier"),
         Param("gate_max", "int", 2, "at most this many consecutive gated steps"),
         Param("rho", "float", 0.95, "forgetting factor for search = stf"),
-        Param("unreachable", "str", "lam_max", "if lam_max cannot fit the observation: use lam_max, or the grid minimiser", choices=UNREACHABLE),
+        Param(
+            "unreachable",
+            "str",
+            "innovation",
+            "if lam_max cannot fit the observation: the one-step innovation-matching factor, lam_max, or the grid minimiser",
+            choices=UNREACHABLE,
+        ),
     ),
     aliases=("improved",),
 )
