@@ -316,3 +316,55 @@ def test_default_ifmkf_is_stable_and_not_worse_than_the_plain_filter_over_the_fu
     d = per_run_rmse(track) - per_run_rmse(plain)
     upper = d.mean() + stats.t.ppf(0.999, runs - 1) * d.std(ddof=1) / np.sqrt(runs)
     assert upper < 0.0, (d.mean(), upper)
+
+
+def test_gated_step_info_describes_the_rejected_measurement():
+    # The contract of the Gaussian filters' step info (filters/gaussian.py): on a
+    # gated step the estimate is the prediction, while innovation, S, NIS, dof
+    # and loglik describe the measurement that was rejected, as for `gate=p`.
+    sc = UnderwaterTOA(condition="abnormal")
+    runs = 20
+    sim = sc.simulate(run_streams(4, range(runs), 0), runs)
+    filt = pu.ExtendedKalmanFilter(sc.motion, sc.measurement, fading=pu.Improved())
+    track = pu.run(filt, sim.measurements, sim.prior, store_predictions=True)
+    k = sc.outlier_step - 1
+    gated = track.info["gated"][k]
+    assert gated.all()
+    info = {key: track.info[key][k] for key in ("innovation", "S", "nis", "dof", "loglik", "pred_mean", "pred_cov")}
+    z, meas = sim.measurements[k], sc.measurement
+    nu = z - meas.h(info["pred_mean"], k + 1)
+    H = meas.jacobian(info["pred_mean"], k + 1)
+    S = H @ info["pred_cov"] @ np.swapaxes(H, -1, -2) + meas.cov(k + 1)
+    nis = np.einsum("...i,...ij,...j->...", nu, np.linalg.inv(S), nu)
+    np.testing.assert_allclose(info["innovation"], nu, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(info["S"], S, rtol=1e-10)
+    np.testing.assert_allclose(info["nis"], nis, rtol=1e-8)
+    assert np.all(info["dof"] == 3)
+    _, logdet = np.linalg.slogdet(S)
+    np.testing.assert_allclose(info["loglik"], -0.5 * (nis + logdet + 3 * np.log(2 * np.pi)), rtol=1e-8)
+    assert np.all(info["nis"] > 1e3)  # the +1 m outlier, now visible to NIS/ANIS
+    # ... and the estimate is the prediction, with λ = 1
+    np.testing.assert_array_equal(track.mean[k], info["pred_mean"])
+    np.testing.assert_array_equal(track.cov[k], info["pred_cov"])
+    assert np.all(track.info["fading"][k] == 1.0)
+
+
+def test_gated_step_info_equals_the_chi_square_gate_on_the_same_step():
+    # Both gates keep the prediction and report the rejected measurement: from
+    # the same state, on the outlier step, an EKF with a χ² gate reports the
+    # same numbers as IFMKF.
+    sc = UnderwaterTOA(condition="abnormal", steps=16)
+    sim = sc.simulate(run_streams(4, range(10), 0), 10)
+    ifm = pu.ExtendedKalmanFilter(sc.motion, sc.measurement, fading=pu.Improved())
+    chi = pu.ExtendedKalmanFilter(sc.motion, sc.measurement, gate=0.999)
+    state = ifm.init(sim.prior, batch=(10,))
+    k = sc.outlier_step
+    for i in range(k - 1):
+        state, _ = ifm.step(state, sim.measurements[i])
+    after_ifm, info_ifm = ifm.step(state, sim.measurements[k - 1])
+    after_chi, info_chi = chi.step(pu.filters.GaussianState(state.mean, state.cov, state.k), sim.measurements[k - 1])
+    assert info_ifm["gated"].all() and info_chi["gated"].all()
+    for key in ("innovation", "S", "nis", "dof", "loglik"):
+        np.testing.assert_array_equal(info_ifm[key], info_chi[key], err_msg=key)
+    np.testing.assert_array_equal(after_ifm.mean, after_chi.mean)
+    np.testing.assert_array_equal(after_ifm.cov, after_chi.cov)

@@ -48,7 +48,9 @@ class Fade:
         Fading factor λ ≥ 1, a scalar or ``(*batch,)``.
     skip
         Optional ``(*batch,)`` boolean: runs whose measurement update is
-        skipped this step (an outlier gate); they only predict.
+        skipped this step (an outlier gate); they only predict, while the
+        step info (``innovation``, ``S``, ``nis``, ``dof``, ``loglik``) still
+        describes the measurement they rejected.
     info
         Extra per-step diagnostics, copied into the filter's step info.
     """

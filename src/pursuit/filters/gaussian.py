@@ -321,11 +321,12 @@ class _GaussianFilter:
         lam = np.asarray(fade.lam, dtype=float)
         P_pred = _scale(lam, pred.propagated) + pred.Q
 
-        valid = ~np.isnan(z)
-        if fade.skip is not None:
-            valid = valid & ~np.asarray(fade.skip, dtype=bool)[..., None]
         meas = self._measure(pred.mean, P_pred, k)
-        mean, cov, info = _update(pred.mean, P_pred, z, valid, meas, self.measurement, k)
+        mean, cov, info = _update(pred.mean, P_pred, z, ~np.isnan(z), meas, self.measurement, k)
+        if fade.skip is not None:
+            # The strategy's own gate: those runs keep the prediction, while the
+            # info still describes the measurement they rejected (as for `gate`).
+            mean, cov = _keep_prediction(np.asarray(fade.skip, dtype=bool), pred.mean, P_pred, mean, cov)
         gated = np.zeros(batch, dtype=bool)
         if self.gate is not None:
             mean, cov, gated = _apply_gate(self.gate, info, pred.mean, P_pred, mean, cov)
@@ -374,12 +375,18 @@ def _apply_gate(gate, info, x_pred, P_pred, mean, cov):
     nis, dof = info["nis"], info["dof"]
     thresholds = chi2_gate_thresholds(gate, info["innovation"].shape[-1])
     gated = np.asarray(nis > thresholds[dof])  # NaN NIS (nothing measured) is never gated
-    if not gated.any():
-        return mean, cov, gated
-    n = mean.shape[-1]
-    mean = np.where(gated[..., None], x_pred, mean)
-    cov = np.where(gated[..., None, None], np.broadcast_to(P_pred, (*gated.shape, n, n)), cov)
+    mean, cov = _keep_prediction(gated, x_pred, P_pred, mean, cov)
     return mean, cov, gated
+
+
+def _keep_prediction(mask, x_pred, P_pred, mean, cov):
+    """The predicted mean and covariance where ``mask`` (``(*b,)``) is True, the update elsewhere."""
+    if not mask.any():
+        return mean, cov
+    n = mean.shape[-1]
+    mean = np.where(mask[..., None], x_pred, mean)
+    cov = np.where(mask[..., None, None], np.broadcast_to(P_pred, (*mask.shape, n, n)), cov)
+    return mean, cov
 
 
 def _any_repaired(batch, *flags) -> np.ndarray:
