@@ -107,3 +107,26 @@ def test_locate():
     assert locate(text, "filters[1]") == 15
     assert locate(text, "filters[1].fading.lam") == 15
     assert locate(text, "nothing.here") is None
+
+
+@pytest.mark.parametrize(
+    "fading,lam",
+    [
+        ('{ type = "tfmkf" }', 1.23),  # paper P2's TFMKF
+        ('{ type = "tfmkf", lam = 1.5 }', 1.5),
+        ('{ type = "constant" }', 1.0),  # the plain filter unless told
+        ("1.23", 1.23),
+    ],
+)
+def test_constant_fading_types_and_their_defaults(tmp_path, fading, lam):
+    exp = load_experiment(write(tmp_path, GOOD.replace("alpha = 0.5", f"fading = {fading}")))
+    strategy = exp.plan.filters[1].fading
+    assert type(strategy).__name__ == "Constant"
+    assert strategy.lam == lam
+
+
+def test_tfmkf_refuses_an_impossible_factor_naming_the_field(tmp_path):
+    p = write(tmp_path, GOOD.replace("alpha = 0.5", 'fading = { type = "tfmkf", lam = 0.5 }'))
+    with pytest.raises(ConfigError, match=r"filters\[1\]\.fading\.lam: must lie in") as info:
+        load_experiment(p)
+    assert info.value.line == 17
