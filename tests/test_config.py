@@ -61,6 +61,8 @@ def test_bundled_experiments_load():
         ('type = "ukf"', 'type = "xkf"', "filters[1].type: unknown filter 'xkf'", 16),
         ("alpha = 0.5", "alpha = -0.5", "filters[1].alpha: must lie in", 17),
         ("alpha = 0.5", "fading = 0.5", "filters[1].fading.lam: must lie in", 17),
+        ("alpha = 0.5", "kappa = -4.0", "filters[1].kappa: must exceed -n = -4", 17),  # n + κ = 0: no sigma points
+        ("alpha = 0.5", "kappa = -7.5", "filters[1].kappa: must exceed -n = -4", 17),
         ("alpha = 0.5", 'name = "EKF"', "filters: names must be unique", None),
         ('type = "wsn-range"', 'type = "moon"', "scenario.type: unknown scenario 'moon'", 7),
         ("[experiment]", "[experimant]\n[experiment]", "experimant: unknown section", None),
@@ -130,3 +132,22 @@ def test_tfmkf_refuses_an_impossible_factor_naming_the_field(tmp_path):
     with pytest.raises(ConfigError, match=r"filters\[1\]\.fading\.lam: must lie in") as info:
         load_experiment(p)
     assert info.value.line == 17
+
+
+def test_kappa_just_above_minus_n_is_accepted(tmp_path):
+    exp = load_experiment(write(tmp_path, GOOD.replace("alpha = 0.5", "kappa = -3.5")))
+    assert exp.plan.filters[1].kappa == -3.5
+
+
+def test_cli_refuses_a_kappa_without_sigma_points_with_exit_2_and_writes_nothing(tmp_path, capsys):
+    # Before the check in UnscentedKalmanFilter.__post_init__ this ran, wrote
+    # the output folder and died at the first step with a traceback (exit 1).
+    from pursuit.cli import main
+
+    p = write(tmp_path, GOOD.replace("alpha = 0.5", "kappa = -4.0"))
+    out = tmp_path / "out"
+    assert main(["run", str(p), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert err[0].startswith(f"pursuit: error: {p}:17: filters[1].kappa: must exceed -n = -4")
+    assert list(tmp_path.iterdir()) == [p]

@@ -648,7 +648,9 @@ class UnscentedKalmanFilter(_SigmaPointFilter):
         As :class:`ExtendedKalmanFilter`.
     alpha, beta, kappa
         Sigma-point spread, prior-knowledge and secondary scaling parameters
-        (defaults 1, 2, 0: weights are non-negative for any n).  With
+        (defaults 1, 2, 0: weights are non-negative for any n).  ``kappa``
+        must satisfy n + κ > 0 (checked at construction when the motion
+        model has ``dim``).  With
         λ_ut = α²(n + κ) − n the points are x ± √(n + λ_ut)·(columns of
         chol P), W₀ᵐ = λ_ut/(n + λ_ut), W₀ᶜ = W₀ᵐ + 1 − α² + β,
         Wᵢ = 1/(2(n + λ_ut)).
@@ -668,6 +670,11 @@ class UnscentedKalmanFilter(_SigmaPointFilter):
         in_range("alpha", self.alpha, 0.0, 1.0e3, low_open=True)
         nonnegative("beta", self.beta)
         in_range("kappa", self.kappa, -1.0e6, 1.0e6)
+        n = getattr(self.motion, "dim", None)  # a user's model may not say; _weights checks again
+        if isinstance(n, (int, np.integer)) and not n + self.kappa > 0:
+            raise ValueError(
+                f"kappa: must exceed -n = {-n} for the {n}-dimensional state (n + kappa > 0 keeps the sigma points real), got {self.kappa!r}"
+            )
 
     def _default_name(self) -> str:
         return "UKF"
