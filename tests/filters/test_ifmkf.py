@@ -343,9 +343,11 @@ def test_gated_step_info_describes_the_rejected_measurement():
     _, logdet = np.linalg.slogdet(S)
     np.testing.assert_allclose(info["loglik"], -0.5 * (nis + logdet + 3 * np.log(2 * np.pi)), rtol=1e-8)
     assert np.all(info["nis"] > 1e3)  # the +1 m outlier, now visible to NIS/ANIS
-    # ... and the estimate is the prediction, with λ = 1
+    # ... and the estimate is the prediction (covariance symmetrised), with λ = 1
     np.testing.assert_array_equal(track.mean[k], info["pred_mean"])
-    np.testing.assert_array_equal(track.cov[k], info["pred_cov"])
+    P = info["pred_cov"]
+    np.testing.assert_array_equal(track.cov[k], 0.5 * (P + np.swapaxes(P, -1, -2)))
+    assert np.array_equal(track.cov[k], np.swapaxes(track.cov[k], -1, -2))
     assert np.all(track.info["fading"][k] == 1.0)
 
 

@@ -380,12 +380,16 @@ def _apply_gate(gate, info, x_pred, P_pred, mean, cov):
 
 
 def _keep_prediction(mask, x_pred, P_pred, mean, cov):
-    """The predicted mean and covariance where ``mask`` (``(*b,)``) is True, the update elsewhere."""
+    """The predicted mean and covariance where ``mask`` (``(*b,)``) is True, the update elsewhere.
+
+    The kept covariance is symmetrised like every updated one (F P Fᵀ is
+    symmetric only to round-off).
+    """
     if not mask.any():
         return mean, cov
     n = mean.shape[-1]
     mean = np.where(mask[..., None], x_pred, mean)
-    cov = np.where(mask[..., None, None], np.broadcast_to(P_pred, (*mask.shape, n, n)), cov)
+    cov = np.where(mask[..., None, None], np.broadcast_to(symmetrize(P_pred), (*mask.shape, n, n)), cov)
     return mean, cov
 
 
