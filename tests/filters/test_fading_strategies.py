@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import pursuit as pu
+from pursuit.filters.fading import CONDITION_LIMIT, FadingContext
 from pursuit.filters.fading_adaptive import diag_sandwich
 from pursuit.models import ConstantVelocity, LinearGaussian
 from pursuit.rng import run_streams
@@ -192,3 +193,47 @@ def test_diag_sandwich_is_the_diagonal_of_h_a_ht(rng):
 def test_impossible_parameters_are_refused_naming_the_field(factory, message):
     with pytest.raises(ValueError, match=message):
         factory()
+
+
+def _context(z, pbar, r, q=0.0):
+    """A fading context for a direct measurement of the state (H = I), prediction 0."""
+    z = np.asarray(z, dtype=float)
+    m = z.shape[-1]
+    return FadingContext(
+        k=1,
+        pred_mean=np.zeros(z.shape),
+        propagated_cov=np.diag(pbar),
+        process_cov=q * np.eye(m),
+        z=z,
+        measurement=LinearGaussian(np.eye(m), np.diag(r)),
+        trial_update=lambda lam: (_ for _ in ()).throw(AssertionError("not needed")),
+    )
+
+
+def test_lam_ceiling_is_kappa_times_tr_r_over_tr_hph_over_every_component():
+    # The second component is missing, yet its block of P̄ counts: it must not
+    # grow unbounded now and meet a precise measurement later.
+    ctx = _context([[1.0e3, np.nan]], pbar=[1e-6, 1.0], r=[1e-6, 1e-6])
+    expected = CONDITION_LIMIT * 2e-6 / (1e-6 + 1.0)
+    np.testing.assert_allclose(ctx.lam_ceiling, [expected], rtol=1e-12)
+    assert CONDITION_LIMIT == pytest.approx(1 / np.sqrt(np.finfo(float).eps))
+    # never below 1, infinite without propagated uncertainty
+    assert _context([[1.0]], pbar=[1e3], r=[1e-6]).lam_ceiling[0] == 1.0
+    assert _context([[1.0]], pbar=[0.0], r=[1e-6]).lam_ceiling[0] == np.inf
+
+
+@pytest.mark.parametrize("lam_max,expected", [(np.inf, "ceiling"), (1.0e4, 1.0e4)])
+def test_trace_ratio_strategies_stop_at_the_ceiling(lam_max, expected):
+    # First innovation 1e3 against P̄ = R = 1e-6: the trace ratio is ~1e12.
+    ctx = _context([[1.0e3]], pbar=[1e-6], r=[1e-6])
+    ceiling = float(ctx.lam_ceiling[0])
+    assert ceiling == pytest.approx(CONDITION_LIMIT)
+    want = ceiling if expected == "ceiling" else expected
+    for strategy in (pu.ExponentiallyWeighted(lam_max=lam_max), pu.StrongTracking(lam_max=lam_max)):
+        fade, _ = strategy.factor(strategy.init((1,)), _context([[1.0e3]], pbar=[1e-6], r=[1e-6]))
+        assert float(fade.lam[0]) == want
+
+
+def test_default_lambda_cap_of_the_adaptive_strategies_is_spec_03s_lam_max():
+    for strategy in (pu.ExponentiallyWeighted(), pu.StrongTracking(), pu.Improved()):
+        assert strategy.lam_max == 1.0e4

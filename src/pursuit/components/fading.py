@@ -6,19 +6,12 @@ accept a bare number; the adaptive strategies are here.
 
 from __future__ import annotations
 
-import numpy as np
-
+from ..filters.fading_adaptive import LAM_MAX as _LAM_MAX
 from ..filters.fading_adaptive import ExponentiallyWeighted, StrongTracking
 from ..filters.ifmkf import SEARCHES, TESTS, UNREACHABLE, Improved
 from ..registry import Param, register
 
-LAM_MAX = Param("lam_max", "float", None, "upper bound on the fading factor (default: none)")
-
-
-def _no_bound(kw: dict) -> dict:
-    if kw.get("lam_max") is None:
-        kw["lam_max"] = np.inf
-    return kw
+LAM_MAX = Param("lam_max", "float", _LAM_MAX, "upper bound on the fading factor (e.g. 1e300: only the numerical ceiling)")
 
 
 @register(
@@ -29,7 +22,7 @@ def _no_bound(kw: dict) -> dict:
     aliases=("exponentially-weighted",),
 )
 def _ewfmkf(**kw) -> ExponentiallyWeighted:
-    return ExponentiallyWeighted(**_no_bound(kw))
+    return ExponentiallyWeighted(**kw)
 
 
 @register(
@@ -44,7 +37,7 @@ def _ewfmkf(**kw) -> ExponentiallyWeighted:
     aliases=("strong-tracking",),
 )
 def _stf(**kw) -> StrongTracking:
-    return StrongTracking(**_no_bound(kw))
+    return StrongTracking(**kw)
 
 
 @register(
@@ -57,7 +50,7 @@ def _stf(**kw) -> StrongTracking:
         Param("test", "str", "window", "divergence test: windowed median and slope, instantaneous, or whole-process mean", choices=TESTS),
         Param("hysteresis", "bool", True, "stay diverging while the windowed median exceeds the threshold"),
         Param("search", "str", "consistent", "lambda when diverging: noise-consistent bisection, grid minimum, or strong tracking", choices=SEARCHES),
-        Param("lam_max", "float", 1.0e4, "largest fading factor considered"),
+        Param("lam_max", "float", _LAM_MAX, "largest fading factor considered"),
         Param("iterations", "int", 20, "bisection steps on log lambda"),
         Param("grid", "int", 200, "log-grid points (search = minimise, and the bisection's fallback)"),
         Param("gate", "bool", True, "skip the update for an isolated outlier"),

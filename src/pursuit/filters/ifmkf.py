@@ -82,7 +82,7 @@ import numpy as np
 
 from .._validation import in_range, positive, positive_int
 from .fading import Fade, FadingContext
-from .fading_adaptive import StrongTracking, TraceMemory, _trace_ratio, _update_moment, diag_sandwich
+from .fading_adaptive import LAM_MAX, StrongTracking, TraceMemory, _trace_ratio, _update_moment, diag_sandwich
 
 __all__ = ["Improved", "ImprovedMemory"]
 
@@ -142,7 +142,9 @@ class Improved:
         How λ is chosen when diverging: ``"consistent"`` (default),
         ``"minimise"`` or ``"stf"``.
     lam_max
-        Largest λ considered (default 1e4).
+        Largest λ considered (default 1e4).  The numerical ceiling
+        :attr:`~pursuit.filters.fading.FadingContext.lam_ceiling` also
+        bounds every search.
     iterations
         Bisection steps on log λ (default 20: λ to a relative 1e-5 for λ_max = 1e4).
     grid
@@ -171,7 +173,7 @@ class Improved:
     test: str = "window"
     hysteresis: bool = True
     search: str = "consistent"
-    lam_max: float = 1.0e4
+    lam_max: float = LAM_MAX
     iterations: int = 20
     grid: int = 200
     gate: bool = True
@@ -285,20 +287,26 @@ class Improved:
     def _choose(self, ctx: FadingContext, active: np.ndarray, v: np.ndarray, stf: TraceMemory | None) -> np.ndarray:
         if self.search == "stf":
             return _trace_ratio(ctx, stf.second_moment, 1.0, self.lam_max)
+        # The largest λ of every search: λ_max, or the numerical ceiling if lower.
+        top = np.broadcast_to(np.minimum(self.lam_max, ctx.lam_ceiling), active.shape)
         if self.search == "minimise":
-            return self._grid_search(ctx, active, None)
-        return self._consistent(ctx, active, self.beta * v)
+            return self._grid_search(ctx, active, None, top)
+        return self._consistent(ctx, active, self.beta * v, top)
 
     def _log_grid(self) -> np.ndarray:
         return np.exp(np.linspace(0.0, np.log(self.lam_max), self.grid))
 
-    def _grid_search(self, ctx: FadingContext, active: np.ndarray, target: np.ndarray | None) -> np.ndarray:
-        """Smallest grid λ with post-fit residual ≤ target (λ_max if none); or, without target, the argmin."""
+    def _grid_search(self, ctx: FadingContext, active: np.ndarray, target: np.ndarray | None, top: np.ndarray) -> np.ndarray:
+        """Smallest grid λ with post-fit residual ≤ target (``top`` if none); or, without target, the argmin.
+
+        The grid spans [1, λ_max]; a run's points above its ``top`` are taken at ``top``.
+        """
         grid = self._log_grid()
-        best_lam = np.full(active.shape, self.lam_max)
+        best_lam = top.copy()
         best_val = np.full(active.shape, np.inf)
         found = np.zeros(active.shape, dtype=bool)
-        for lam in grid:
+        for point in grid:
+            lam = np.minimum(point, top)
             g = _post_fit(ctx, np.where(active, lam, 1.0))
             if target is None:
                 better = active & (g < best_val)
@@ -310,21 +318,21 @@ class Improved:
                 found = found | hit
         return best_lam
 
-    def _consistent(self, ctx: FadingContext, active: np.ndarray, target: np.ndarray) -> np.ndarray:
-        """Variant (i): smallest λ with ‖z − h(x̂(λ))‖_max ≤ target, by bisection on log λ."""
+    def _consistent(self, ctx: FadingContext, active: np.ndarray, target: np.ndarray, top: np.ndarray) -> np.ndarray:
+        """Variant (i): smallest λ ≤ ``top`` with ‖z − h(x̂(λ))‖_max ≤ target, by bisection on log λ."""
         g_one = _post_fit(ctx, np.ones(active.shape))
-        g_max = _post_fit(ctx, np.where(active, self.lam_max, 1.0))
-        lam = np.where(g_one <= target, 1.0, self.lam_max)
+        g_max = _post_fit(ctx, np.where(active, top, 1.0))
+        lam = np.where(g_one <= target, 1.0, top)
         out_of_reach = active & (g_one > target) & (g_max > target)
         if np.any(out_of_reach):
             if self.unreachable == "innovation":
-                lam = np.where(out_of_reach, _innovation_factor(ctx, self.lam_max), lam)
+                lam = np.where(out_of_reach, _innovation_factor(ctx, top), lam)
             elif self.unreachable == "minimise":
-                lam = np.where(out_of_reach, self._grid_search(ctx, out_of_reach, None), lam)
+                lam = np.where(out_of_reach, self._grid_search(ctx, out_of_reach, None, top), lam)
         need = active & (g_one > target) & (g_max <= target)
         if not np.any(need):
             return lam
-        lo, hi = np.zeros(active.shape), np.full(active.shape, np.log(self.lam_max))
+        lo, hi = np.zeros(active.shape), np.log(top)
         g_lo = g_one
         bumpy = np.zeros(active.shape, dtype=bool)
         for _ in range(self.iterations):
@@ -339,10 +347,10 @@ class Improved:
             lo = np.where(above, mid, lo)
             g_lo = np.where(above, g, g_lo)
             hi = np.where(need & ~above, mid, hi)
-        lam = np.where(need, np.minimum(np.exp(hi), self.lam_max), lam)
+        lam = np.where(need, np.minimum(np.exp(hi), top), lam)
         if np.any(bumpy):
             # Keep the bisection's λ unless the grid finds a smaller one that fits.
-            lam = np.where(bumpy, np.minimum(lam, self._grid_search(ctx, bumpy, target)), lam)
+            lam = np.where(bumpy, np.minimum(lam, self._grid_search(ctx, bumpy, target, top)), lam)
         return lam
 
 
@@ -360,7 +368,7 @@ def _max_abs(residual: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return np.where(valid.any(axis=-1), m, np.nan)
 
 
-def _innovation_factor(ctx: FadingContext, lam_max: float) -> np.ndarray:
+def _innovation_factor(ctx: FadingContext, lam_max: float | np.ndarray) -> np.ndarray:
     """λ_ν = min(λ_max, max(1, tr(ν νᵀ − HQHᵀ − R) / tr(HP̄Hᵀ))) from this step's innovation alone."""
     nu = np.where(ctx.measured, ctx.innovation, 0.0)
     return _trace_ratio(ctx, nu * nu, 1.0, lam_max)
