@@ -66,6 +66,7 @@ def test_every_strategy_runs_in_every_filter_and_records_lambda(kind):
         assert track.info["faded"].any()
 
 
+@pytest.mark.parametrize("kind", list(FILTERS))
 @settings(max_examples=25)
 @given(
     b=st.floats(0.05, 0.99),
@@ -75,17 +76,37 @@ def test_every_strategy_runs_in_every_filter_and_records_lambda(kind):
     lam_max=st.floats(1.0, 1.0e5),
     seed=st.integers(0, 2**16),
 )
-def test_lambda_is_never_below_one_nor_above_its_cap(b, rho, beta_s, beta, lam_max, seed):
-    scenario = UnderwaterTOA(condition="abnormal", steps=20, mismatch=(-0.5, 1.0))
+def test_lambda_is_never_below_one_nor_above_its_cap(kind, b, rho, beta_s, beta, lam_max, seed):
+    # The KF gets the position fix (a linear measurement), the others the ranges.
+    mode = "position" if kind == "kf" else "ranges"
+    scenario = UnderwaterTOA(condition="abnormal", steps=20, mismatch=(-0.5, 1.0), mode=mode)
     sim = _sim(scenario, 4, seed)
     for strategy in (
         pu.ExponentiallyWeighted(b=b, lam_max=lam_max),
         pu.StrongTracking(rho=rho, beta=beta_s, lam_max=lam_max),
         pu.Improved(beta=beta, lam_max=lam_max),
     ):
-        lam = pu.run(pu.ExtendedKalmanFilter(scenario.motion, scenario.measurement, fading=strategy), sim.measurements, sim.prior).info["fading"]
+        filt = FILTERS[kind](scenario.motion, scenario.measurement, fading=strategy)
+        lam = pu.run(filt, sim.measurements, sim.prior).info["fading"]
         assert np.all(lam >= 1.0)
         assert np.all(lam <= lam_max)
+
+
+@pytest.mark.parametrize("strategy", [pu.ExponentiallyWeighted(), pu.StrongTracking(), pu.Improved()], ids=["ewfmkf", "stf", "ifmkf"])
+def test_kf_with_an_adaptive_strategy_fades_and_equals_the_ekf_on_a_linear_model(strategy):
+    # The position fix of the TOA scenario is a linear measurement: the KF
+    # applies, and with the unknown drift every adaptive strategy fades.
+    sc = UnderwaterTOA(condition="actual", mode="position")
+    sim = _sim(sc, 10)
+    kf = pu.run(pu.KalmanFilter(sc.motion, sc.measurement, fading=strategy), sim.measurements, sim.prior)
+    ekf = pu.run(pu.ExtendedKalmanFilter(sc.motion, sc.measurement, fading=strategy), sim.measurements, sim.prior)
+    lam = kf.info["fading"]
+    assert kf.info["faded"].mean() > 0.2
+    assert np.unique(lam[lam > 1.0]).size > 10  # λ differs between runs and steps
+    np.testing.assert_allclose(lam, ekf.info["fading"], rtol=1e-9)
+    np.testing.assert_allclose(kf.mean, ekf.mean, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(kf.cov, ekf.cov, rtol=1e-7, atol=1e-15)
+    assert np.all(np.isfinite(kf.mean))
 
 
 def _reference_trace_factor(track, motion, measurement, prior, rule, weakening=1.0):
