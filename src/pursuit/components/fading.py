@@ -1,24 +1,23 @@
 """Fading-strategy registrations: ``fading = {type = "...", ...}`` in a filter entry.
 
-The ``constant`` strategy (TFMKF) is registered with the filters, which also
+The constant strategies (``constant``, ``tfmkf``) are registered with the filters, which also
 accept a bare number; the adaptive strategies are here.
 """
 
 from __future__ import annotations
 
-from ..filters.fading_adaptive import LAM_MAX as _LAM_MAX
-from ..filters.fading_adaptive import ExponentiallyWeighted, StrongTracking
+from ..filters.fading_adaptive import LAM_MAX, ExponentiallyWeighted, StrongTracking
 from ..filters.ifmkf import SEARCHES, TESTS, UNREACHABLE, Improved
 from ..registry import Param, register
 
-LAM_MAX = Param("lam_max", "float", _LAM_MAX, "upper bound on the fading factor (e.g. 1e300: only the numerical ceiling)")
+LAM_MAX_PARAM = Param("lam_max", "float", LAM_MAX, "upper bound on the fading factor (e.g. 1e300: only the numerical ceiling)")
 
 
 @register(
     "fading",
     "ewfmkf",
     "Exponentially weighted adaptive fading factor (EWFMKF, paper P2 baseline; reconstruction)",
-    params=(Param("b", "float", 0.95, "forgetting factor in (0, 1); larger remembers longer"), LAM_MAX),
+    params=(Param("b", "float", 0.95, "forgetting factor in (0, 1); larger remembers longer"), LAM_MAX_PARAM),
     aliases=("exponentially-weighted",),
 )
 def _ewfmkf(**kw) -> ExponentiallyWeighted:
@@ -32,7 +31,7 @@ def _ewfmkf(**kw) -> ExponentiallyWeighted:
     params=(
         Param("rho", "float", 0.95, "forgetting factor in (0, 1]"),
         Param("beta", "float", 1.0, "weakening factor on R, at least 1"),
-        LAM_MAX,
+        LAM_MAX_PARAM,
     ),
     aliases=("strong-tracking",),
 )
@@ -50,7 +49,7 @@ def _stf(**kw) -> StrongTracking:
         Param("test", "str", "window", "divergence test: windowed median and slope, instantaneous, or whole-process mean", choices=TESTS),
         Param("hysteresis", "bool", True, "stay diverging while the windowed median exceeds the threshold"),
         Param("search", "str", "consistent", "lambda when diverging: noise-consistent bisection, grid minimum, or strong tracking", choices=SEARCHES),
-        Param("lam_max", "float", _LAM_MAX, "largest fading factor considered"),
+        Param("lam_max", "float", LAM_MAX, "largest fading factor considered"),
         Param("iterations", "int", 20, "bisection steps on log lambda"),
         Param("grid", "int", 200, "log-grid points (search = minimise, and the bisection's fallback)"),
         Param("gate", "bool", True, "skip the update for an isolated outlier"),
