@@ -1,11 +1,14 @@
 """One single run of 10^6 steps per Gaussian filter on the hard long scenario.
 
-    python benchmarks/long_run.py [FILTER ...]     (from the repository root; default: all)
+    python benchmarks/long_run.py [NAME ...] [--steps N]    (from the repository root)
 
-FILTER is kf, ekf, ukf, ckf (the hard long scenario) or one of the maneuvering-target
-filters cs, apcs, ms, kf-singer, imm-singer (the long maneuvering scenario of
-tests/filters/test_robustness.py: a 3-D maneuvering path at 200 km sampled every second,
-1 mm fixes, 20 % missing components and 100 s outages).
+NAME is a filter (kf, ekf, ukf, ckf), a filter with a fading strategy
+(ekf+stf, ukf+ifmkf, ...: strategies ewfmkf, stf, ifmkf with their defaults),
+a maneuvering-target filter (cs, apcs, ms, kf-singer, imm-singer: the long
+maneuvering scenario of tests/filters/test_robustness.py, a 3-D maneuvering
+path at 200 km sampled every second, 1 mm fixes, 20 % missing components and
+100 s outages), or a group: plain (the four filters; the default), fading (the
+twelve fading variants), maneuver (the five maneuvering filters) or all.
 
 The test suite checks 10^6 filter steps per filter as 200 runs x 5000 steps
 (tests/filters/test_robustness.py), which costs seconds; this script runs the
@@ -37,6 +40,27 @@ FILTERS = {
     "ukf": (pu.UnscentedKalmanFilter, "range"),
     "ckf": (pu.CubatureKalmanFilter, "toa"),
 }
+FADING = {"ewfmkf": pu.ExponentiallyWeighted, "stf": pu.StrongTracking, "ifmkf": pu.Improved}
+GROUPS = {
+    "plain": list(FILTERS),
+    "fading": [f"{f}+{s}" for f in FILTERS for s in FADING],
+}
+GROUPS["maneuver"] = list(MANEUVER_FILTERS)
+GROUPS["all"] = GROUPS["plain"] + GROUPS["fading"] + GROUPS["maneuver"]
+
+
+def _expand(names: list[str]) -> list[str]:
+    out = []
+    for name in names or ["plain"]:
+        for n in GROUPS.get(name, [name]):
+            f, _, s = n.partition("+")
+            if n not in MANEUVER_FILTERS and (f not in FILTERS or (s and s not in FADING)):
+                raise SystemExit(
+                    f"unknown name {n!r}: use {', '.join(FILTERS)}, FILTER+{{{','.join(FADING)}}}, "
+                    f"{', '.join(MANEUVER_FILTERS)} or {', '.join(GROUPS)}"
+                )
+            out.append(n)
+    return out
 
 
 def _factors(c: np.ndarray) -> bool:
@@ -79,36 +103,54 @@ def maneuver_run(name: str, steps: int = 10**6) -> None:
     )
 
 
-def main(names: list[str]) -> int:
-    for name in names or [*FILTERS, *MANEUVER_FILTERS]:
+def main(argv: list[str]) -> int:
+    steps = 10**6
+    if "--steps" in argv:
+        i = argv.index("--steps")
+        steps = int(argv[i + 1])
+        argv = argv[:i] + argv[i + 2 :]
+    for name in _expand(argv):
         if name in MANEUVER_FILTERS:
-            maneuver_run(name)
+            maneuver_run(name, steps)
             continue
-        cls, sensor = FILTERS[name]
-        motion, meas, z, dts, prior = long_scenario(sensor, runs=1, steps=10**6)
-        filt = cls(motion, meas)
+        f, _, strategy = name.partition("+")
+        cls, sensor = FILTERS[f]
+        motion, meas, z, dts, prior = long_scenario(sensor, runs=1, steps=steps)
+        filt = cls(motion, meas, fading=FADING[strategy]()) if strategy else cls(motion, meas)
         state = filt.init(prior, (1,))
         covs = np.empty((1000, 1, 4, 4))
         repaired = not_pd = 0
         finite = True
         worst = np.inf
+        lam_max = 1.0
+        faded = 0
         t0 = time.perf_counter()
+        error = ""
         for i in range(z.shape[0]):
-            state, info = filt.step(state, z[i], dt=float(dts[i]))
+            try:
+                state, info = filt.step(state, z[i], dt=float(dts[i]))
+            except (np.linalg.LinAlgError, ValueError) as e:
+                error = f", FAILED at step {i + 1}: {type(e).__name__}: {e}"
+                break
             repaired += int(np.count_nonzero(info["repaired"]))
+            lam = float(np.max(info["fading"]))
+            lam_max = max(lam_max, lam)
+            faded += lam > 1.0
             covs[i % 1000] = state.cov
-            if i % 1000 == 999:
-                finite &= bool(np.all(np.isfinite(covs)) and np.all(np.isfinite(state.mean)))
-                w = np.linalg.eigvalsh(covs)
+            if i % 1000 == 999 or i == z.shape[0] - 1:
+                chunk = covs[: i % 1000 + 1]
+                finite &= bool(np.all(np.isfinite(chunk)) and np.all(np.isfinite(state.mean)))
+                w = np.linalg.eigvalsh(chunk)
                 worst = min(worst, float(np.min(w[..., 0] / w[..., -1])))
                 try:
-                    np.linalg.cholesky(covs)
+                    np.linalg.cholesky(chunk)
                 except np.linalg.LinAlgError:
-                    not_pd += sum(1 for c in covs.reshape(-1, 4, 4) if not _factors(c))
+                    not_pd += sum(1 for c in chunk.reshape(-1, 4, 4) if not _factors(c))
         wall = time.perf_counter() - t0
+        extra = f", faded_steps={faded}, max_lambda={lam_max:.3g}" if strategy else ""
         print(
             f"{name} ({sensor}): {z.shape[0]} steps in one run, {wall:.0f} s, repaired={repaired}, "
-            f"cholesky_failures={not_pd}, all_finite={finite}, min_eig_ratio={worst:.3g}",
+            f"cholesky_failures={not_pd}, all_finite={finite}, min_eig_ratio={worst:.3g}{extra}{error}",
             flush=True,
         )
     return 0

@@ -51,3 +51,21 @@ def test_floor_benchmark_quick_mode():
     assert proc.returncode == 0, proc.stderr
     assert "Generator.standard_normal() in numba, per draw" in proc.stdout
     assert "step kernel alone" in proc.stdout
+
+
+def test_long_run_script_takes_fading_variants_and_a_step_count():
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "long_run.py"), "kf", "ekf+stf", "--steps", "1500"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.strip().splitlines()
+    assert len(lines) == 2
+    assert lines[0].startswith("kf (position): 1500 steps in one run") and "max_lambda" not in lines[0]
+    assert lines[1].startswith("ekf+stf (range): 1500 steps in one run") and "max_lambda=" in lines[1]
+    for line in lines:
+        assert "repaired=0" in line and "cholesky_failures=0" in line and "all_finite=True" in line
+    bad = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "long_run.py"), "ekf+xyz"], capture_output=True, text=True, timeout=60)
+    assert bad.returncode != 0 and "unknown name 'ekf+xyz'" in bad.stderr

@@ -61,6 +61,8 @@ def test_bundled_experiments_load():
         ('type = "ukf"', 'type = "xkf"', "filters[1].type: unknown filter 'xkf'", 16),
         ("alpha = 0.5", "alpha = -0.5", "filters[1].alpha: must lie in", 17),
         ("alpha = 0.5", "fading = 0.5", "filters[1].fading.lam: must lie in", 17),
+        ("alpha = 0.5", "kappa = -4.0", "filters[1].kappa: must exceed -n = -4", 17),  # n + κ = 0: no sigma points
+        ("alpha = 0.5", "kappa = -7.5", "filters[1].kappa: must exceed -n = -4", 17),
         ("alpha = 0.5", 'name = "EKF"', "filters: names must be unique", None),
         ('type = "wsn-range"', 'type = "moon"', "scenario.type: unknown scenario 'moon'", 7),
         ("[experiment]", "[experimant]\n[experiment]", "experimant: unknown section", None),
@@ -107,3 +109,45 @@ def test_locate():
     assert locate(text, "filters[1]") == 15
     assert locate(text, "filters[1].fading.lam") == 15
     assert locate(text, "nothing.here") is None
+
+
+@pytest.mark.parametrize(
+    "fading,lam",
+    [
+        ('{ type = "tfmkf" }', 1.23),  # paper P2's TFMKF
+        ('{ type = "tfmkf", lam = 1.5 }', 1.5),
+        ('{ type = "constant" }', 1.0),  # the plain filter unless told
+        ("1.23", 1.23),
+    ],
+)
+def test_constant_fading_types_and_their_defaults(tmp_path, fading, lam):
+    exp = load_experiment(write(tmp_path, GOOD.replace("alpha = 0.5", f"fading = {fading}")))
+    strategy = exp.plan.filters[1].fading
+    assert type(strategy).__name__ == "Constant"
+    assert strategy.lam == lam
+
+
+def test_tfmkf_refuses_an_impossible_factor_naming_the_field(tmp_path):
+    p = write(tmp_path, GOOD.replace("alpha = 0.5", 'fading = { type = "tfmkf", lam = 0.5 }'))
+    with pytest.raises(ConfigError, match=r"filters\[1\]\.fading\.lam: must lie in") as info:
+        load_experiment(p)
+    assert info.value.line == 17
+
+
+def test_kappa_just_above_minus_n_is_accepted(tmp_path):
+    exp = load_experiment(write(tmp_path, GOOD.replace("alpha = 0.5", "kappa = -3.5")))
+    assert exp.plan.filters[1].kappa == -3.5
+
+
+def test_cli_refuses_a_kappa_without_sigma_points_with_exit_2_and_writes_nothing(tmp_path, capsys):
+    # Before the check in UnscentedKalmanFilter.__post_init__ this ran, wrote
+    # the output folder and died at the first step with a traceback (exit 1).
+    from pursuit.cli import main
+
+    p = write(tmp_path, GOOD.replace("alpha = 0.5", "kappa = -4.0"))
+    out = tmp_path / "out"
+    assert main(["run", str(p), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert err[0].startswith(f"pursuit: error: {p}:17: filters[1].kappa: must exceed -n = -4")
+    assert list(tmp_path.iterdir()) == [p]

@@ -172,10 +172,6 @@ def test_sensor_stack_without_jacobian_uses_each_parts_residual():
     np.testing.assert_allclose(J[0, 1], [-1.0, 0.0, 1e-8, 0.0], rtol=1e-6, atol=1e-9)  # d r = (x, y) / r
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="filters/gaussian.py measurement_jacobian does not yet pass the model's residual to numerical_jacobian",
-)
 def test_ekf_jacobian_of_a_user_bearing_model_at_the_cut():
     from pursuit.filters.gaussian import measurement_jacobian
 
@@ -190,3 +186,28 @@ def test_ekf_jacobian_of_a_user_bearing_model_at_the_cut():
 
     J = measurement_jacobian(TwoBearings(), np.array([[-100.0, 1.0, 1e-6, 0.0]]), 1)
     np.testing.assert_allclose(J[0, 0, 2], -0.01, rtol=1e-6)
+
+
+@pytest.mark.parametrize("batched", [True, False])
+def test_inverse_of_a_floating_point_singular_4x4_is_the_pseudo_inverse(batched, rng):
+    # Four precise ranges of a target whose predicted position variance is 1e12 m²
+    # against R = 1e-6 m²: H P Hᵀ (rank 2) swamps R, S is singular in floating
+    # point and LAPACK's inverse raises.  The healthy matrices of the stack keep
+    # LAPACK's inverse bit for bit; the singular one gets the pseudo-inverse.
+    A = rng.standard_normal((6, 4, 4))
+    good = A @ np.swapaxes(A, -1, -2) + np.eye(4)
+    H = rng.standard_normal((4, 2))
+    singular = 1e12 * H @ H.T + 1e-6 * np.eye(4)
+    singular = 0.5 * (singular + singular.T)
+    S = np.concatenate([good[:3], singular[None], good[3:]]) if batched else singular
+    assert np.linalg.slogdet(singular)[0] == 0  # the hazard is real ...
+    with pytest.raises(np.linalg.LinAlgError):
+        np.linalg.inv(S)  # ... and LAPACK refuses
+    out = inv_spd(S)
+    assert np.all(np.isfinite(out))
+    pinv = np.linalg.pinv(singular, hermitian=True)
+    if batched:
+        np.testing.assert_array_equal(out[[0, 1, 2, 4, 5, 6]], np.linalg.inv(good))
+        np.testing.assert_array_equal(out[3], pinv)
+    else:
+        np.testing.assert_array_equal(out, pinv)

@@ -73,6 +73,10 @@ def inv_spd(S: np.ndarray) -> np.ndarray:
     lose accuracy when the determinant is tiny against the product of the
     diagonal (an ill-conditioned S, e.g. a huge predicted covariance against
     a tiny R); such matrices are inverted by an eigendecomposition instead.
+    For sizes 4 and up, a matrix that is singular in floating point (R lost
+    to round-off against an H P Hᵀ more than 1/ε larger, where LAPACK would
+    raise) gets the same pseudo-inverse; the others keep LAPACK's inverse,
+    bit for bit.
     """
     m = S.shape[-1]
     if m == 1:
@@ -105,7 +109,16 @@ def inv_spd(S: np.ndarray) -> np.ndarray:
             out[..., 1, 2] = (a[..., 0, 2] * a[..., 1, 0] - a[..., 0, 0] * a[..., 1, 2]) / det
             out[..., 2, 2] = (a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]) / det
         return _fix_lost_precision(S, det, out)
-    return np.linalg.inv(S)
+    try:
+        return np.linalg.inv(S)
+    except np.linalg.LinAlgError:
+        pass
+    flat = S.reshape(-1, m, m)
+    bad = np.linalg.slogdet(flat)[0] == 0  # the zero pivot LAPACK's inverse refused
+    out = np.empty(flat.shape, dtype=float)
+    out[~bad] = np.linalg.inv(flat[~bad])
+    out[bad] = np.linalg.pinv(symmetrize(flat[bad]), hermitian=True)
+    return out.reshape(S.shape)
 
 
 # The cofactor determinant of an SPD matrix has a relative error of about

@@ -168,3 +168,20 @@ def test_cli_reproduces_p2_and_writes_the_output(tmp_path, capsys):
     for name in ("cumulative_rmse.csv", "improvement.csv", "paper_vs_measured.csv", "fading.csv", "run.json"):
         assert (tmp_path / "p2" / name).exists()
     assert (tmp_path / "p2" / "figures" / "fading_factor.png").exists()
+
+
+def test_fading_figure_shows_the_median_and_the_share_of_faded_runs(p2_output):
+    # The mean λ of IFMKF is dominated by the few runs at λ_max; the figure shows
+    # the median over runs and, beside it, the share of runs with λ > 1.
+    fig = p2_output.figures["fading_factor"]
+    axes = fig.get_axes()
+    assert len(axes) == 6  # three conditions, two columns
+    left, right = axes[0::2], axes[1::2]
+    assert all(ax.get_ylabel() == "median λ" for ax in left)
+    assert all(ax.get_ylabel() == "runs faded (%)" for ax in right)
+    result = p2_output.results["actual"]
+    names = [line.get_label() for line in left[1].get_lines() if not line.get_label().startswith("_")]
+    i = names.index("IFMKF")
+    lam = result.filters["IFMKF"].info["fading"]
+    np.testing.assert_array_equal(left[1].get_lines()[i].get_ydata(), np.median(lam, axis=1))
+    np.testing.assert_allclose(right[1].get_lines()[i].get_ydata(), 100.0 * np.mean(lam > 1.0, axis=1))

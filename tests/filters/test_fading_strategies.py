@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import pursuit as pu
+from pursuit.filters.fading import CONDITION_LIMIT, FadingContext
 from pursuit.filters.fading_adaptive import diag_sandwich
 from pursuit.models import ConstantVelocity, LinearGaussian
 from pursuit.rng import run_streams
@@ -65,6 +66,7 @@ def test_every_strategy_runs_in_every_filter_and_records_lambda(kind):
         assert track.info["faded"].any()
 
 
+@pytest.mark.parametrize("kind", list(FILTERS))
 @settings(max_examples=25)
 @given(
     b=st.floats(0.05, 0.99),
@@ -74,17 +76,37 @@ def test_every_strategy_runs_in_every_filter_and_records_lambda(kind):
     lam_max=st.floats(1.0, 1.0e5),
     seed=st.integers(0, 2**16),
 )
-def test_lambda_is_never_below_one_nor_above_its_cap(b, rho, beta_s, beta, lam_max, seed):
-    scenario = UnderwaterTOA(condition="abnormal", steps=20, mismatch=(-0.5, 1.0))
+def test_lambda_is_never_below_one_nor_above_its_cap(kind, b, rho, beta_s, beta, lam_max, seed):
+    # The KF gets the position fix (a linear measurement), the others the ranges.
+    mode = "position" if kind == "kf" else "ranges"
+    scenario = UnderwaterTOA(condition="abnormal", steps=20, mismatch=(-0.5, 1.0), mode=mode)
     sim = _sim(scenario, 4, seed)
     for strategy in (
         pu.ExponentiallyWeighted(b=b, lam_max=lam_max),
         pu.StrongTracking(rho=rho, beta=beta_s, lam_max=lam_max),
         pu.Improved(beta=beta, lam_max=lam_max),
     ):
-        lam = pu.run(pu.ExtendedKalmanFilter(scenario.motion, scenario.measurement, fading=strategy), sim.measurements, sim.prior).info["fading"]
+        filt = FILTERS[kind](scenario.motion, scenario.measurement, fading=strategy)
+        lam = pu.run(filt, sim.measurements, sim.prior).info["fading"]
         assert np.all(lam >= 1.0)
         assert np.all(lam <= lam_max)
+
+
+@pytest.mark.parametrize("strategy", [pu.ExponentiallyWeighted(), pu.StrongTracking(), pu.Improved()], ids=["ewfmkf", "stf", "ifmkf"])
+def test_kf_with_an_adaptive_strategy_fades_and_equals_the_ekf_on_a_linear_model(strategy):
+    # The position fix of the TOA scenario is a linear measurement: the KF
+    # applies, and with the unknown drift every adaptive strategy fades.
+    sc = UnderwaterTOA(condition="actual", mode="position")
+    sim = _sim(sc, 10)
+    kf = pu.run(pu.KalmanFilter(sc.motion, sc.measurement, fading=strategy), sim.measurements, sim.prior)
+    ekf = pu.run(pu.ExtendedKalmanFilter(sc.motion, sc.measurement, fading=strategy), sim.measurements, sim.prior)
+    lam = kf.info["fading"]
+    assert kf.info["faded"].mean() > 0.2
+    assert np.unique(lam[lam > 1.0]).size > 10  # λ differs between runs and steps
+    np.testing.assert_allclose(lam, ekf.info["fading"], rtol=1e-9)
+    np.testing.assert_allclose(kf.mean, ekf.mean, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(kf.cov, ekf.cov, rtol=1e-7, atol=1e-15)
+    assert np.all(np.isfinite(kf.mean))
 
 
 def _reference_trace_factor(track, motion, measurement, prior, rule, weakening=1.0):
@@ -192,3 +214,47 @@ def test_diag_sandwich_is_the_diagonal_of_h_a_ht(rng):
 def test_impossible_parameters_are_refused_naming_the_field(factory, message):
     with pytest.raises(ValueError, match=message):
         factory()
+
+
+def _context(z, pbar, r, q=0.0):
+    """A fading context for a direct measurement of the state (H = I), prediction 0."""
+    z = np.asarray(z, dtype=float)
+    m = z.shape[-1]
+    return FadingContext(
+        k=1,
+        pred_mean=np.zeros(z.shape),
+        propagated_cov=np.diag(pbar),
+        process_cov=q * np.eye(m),
+        z=z,
+        measurement=LinearGaussian(np.eye(m), np.diag(r)),
+        trial_update=lambda lam: (_ for _ in ()).throw(AssertionError("not needed")),
+    )
+
+
+def test_lam_ceiling_is_kappa_times_tr_r_over_tr_hph_over_every_component():
+    # The second component is missing, yet its block of P̄ counts: it must not
+    # grow unbounded now and meet a precise measurement later.
+    ctx = _context([[1.0e3, np.nan]], pbar=[1e-6, 1.0], r=[1e-6, 1e-6])
+    expected = CONDITION_LIMIT * 2e-6 / (1e-6 + 1.0)
+    np.testing.assert_allclose(ctx.lam_ceiling, [expected], rtol=1e-12)
+    assert CONDITION_LIMIT == pytest.approx(1 / np.sqrt(np.finfo(float).eps))
+    # never below 1, infinite without propagated uncertainty
+    assert _context([[1.0]], pbar=[1e3], r=[1e-6]).lam_ceiling[0] == 1.0
+    assert _context([[1.0]], pbar=[0.0], r=[1e-6]).lam_ceiling[0] == np.inf
+
+
+@pytest.mark.parametrize("lam_max,expected", [(np.inf, "ceiling"), (1.0e4, 1.0e4)])
+def test_trace_ratio_strategies_stop_at_the_ceiling(lam_max, expected):
+    # First innovation 1e3 against P̄ = R = 1e-6: the trace ratio is ~1e12.
+    ctx = _context([[1.0e3]], pbar=[1e-6], r=[1e-6])
+    ceiling = float(ctx.lam_ceiling[0])
+    assert ceiling == pytest.approx(CONDITION_LIMIT)
+    want = ceiling if expected == "ceiling" else expected
+    for strategy in (pu.ExponentiallyWeighted(lam_max=lam_max), pu.StrongTracking(lam_max=lam_max)):
+        fade, _ = strategy.factor(strategy.init((1,)), _context([[1.0e3]], pbar=[1e-6], r=[1e-6]))
+        assert float(fade.lam[0]) == want
+
+
+def test_default_lambda_cap_of_the_adaptive_strategies_is_spec_03s_lam_max():
+    for strategy in (pu.ExponentiallyWeighted(), pu.StrongTracking(), pu.Improved()):
+        assert strategy.lam_max == 1.0e4

@@ -215,8 +215,17 @@ def test_ukf_rejects_impossible_parameters():
     sc = LinearCV(ndim=1)
     with pytest.raises(ValueError, match="alpha"):
         pu.UnscentedKalmanFilter(sc.motion, sc.measurement, alpha=0.0)
-    ukf = pu.UnscentedKalmanFilter(sc.motion, sc.measurement, alpha=0.1, kappa=-2.5)
-    with pytest.raises(ValueError, match="n \\+ lambda"):
+    # n + κ ≤ 0 leaves no sigma points: refused at construction, naming kappa
+    with pytest.raises(ValueError, match="kappa: must exceed -n = -2"):
+        pu.UnscentedKalmanFilter(sc.motion, sc.measurement, alpha=0.1, kappa=-2.5)
+    pu.UnscentedKalmanFilter(sc.motion, sc.measurement, kappa=-1.5)  # n + κ = 0.5 is fine
+
+    class NoDim:  # a user's motion model that does not state its dimension
+        f = staticmethod(sc.motion.f)
+        cov = staticmethod(sc.motion.cov)
+
+    ukf = pu.UnscentedKalmanFilter(NoDim(), sc.measurement, alpha=0.1, kappa=-2.5)
+    with pytest.raises(ValueError, match="n \\+ lambda"):  # then the first step says so
         pu.run(ukf, np.zeros((2, 1, 1)), pu.Gaussian([0.0, 0.0], np.eye(2)))
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import stats
 
 import pursuit as pu
 from pursuit.filters.fading import FadingContext
@@ -154,10 +155,36 @@ def test_consistent_search_finds_the_smallest_lambda_that_fits():
     np.testing.assert_allclose(out["lam"][active], lam_exact[active], rtol=2e-5)
 
 
-def test_unreachable_level_gives_lam_max():
-    strategy = pu.Improved(gate=False, lam_max=10.0)
+@pytest.mark.parametrize("unreachable", ["lam_max", "innovation"])
+def test_unreachable_level_gives_lam_max(unreachable):
+    # Scalar KF: λ_max = 10 leaves the post-fit residual above the level; the
+    # innovation factor (25 − Q − R)/P̄ ≈ 1.2e5 is capped at λ_max too.
+    strategy = pu.Improved(gate=False, lam_max=10.0, unreachable=unreachable)
     out = _drive(strategy, QUIET + [5.0] * 6)
     assert np.all(out["lam"][-3:] == 10.0)
+
+
+def test_unreachable_level_gives_the_innovation_factor_by_default():
+    # A trial update that never moves the estimate: no λ reaches the level, so
+    # the default takes λ_ν = (ν² − Q − R)/P̄ from this step's innovation alone.
+    def never_fits(k, z):
+        ctx = _scalar_context(k, z)
+        ctx._trial_update = lambda lam: (np.zeros((*np.shape(lam), 1)), None)
+        return ctx
+
+    seq = QUIET + [0.2, 0.3, 0.4, 0.5, 0.6, 0.8]
+    strategy = pu.Improved(gate=False)
+    memory, lams, diverging = strategy.init(()), [], []
+    for k, z in enumerate(seq, start=1):
+        fade, memory = strategy.factor(memory, never_fits(k, z))
+        lams.append(float(fade.lam))
+        diverging.append(bool(fade.info["diverging"]))
+    lams, diverging, z = np.array(lams), np.array(diverging), np.array(seq)
+    assert diverging[-3:].all()
+    expected = np.clip((z**2 - Q - R) / PBAR, 1.0, strategy.lam_max)
+    np.testing.assert_allclose(lams[diverging], expected[diverging], rtol=1e-12)
+    assert np.all(lams[diverging] < strategy.lam_max)  # not the spec's λ_max
+    assert np.all(lams[~diverging] == 1.0)
 
 
 @pytest.mark.parametrize("search", ["minimise", "stf"])
@@ -204,7 +231,7 @@ def test_outlier_alone_does_not_make_ifmkf_fade():
 def test_post_fit_residual_meets_the_level_where_ifmkf_fades():
     """Audit the λ search on the 'actual' condition from outside the strategy."""
     inner = pu.Improved()
-    checks = {"faded": 0}
+    checks = {"faded": 0, "unreachable": 0}
 
     class Audit:
         data_independent = False
@@ -219,17 +246,27 @@ def test_post_fit_residual_meets_the_level_where_ifmkf_fades():
             if faded.any():
                 level = inner.beta * np.sqrt(np.max(np.diagonal(ctx.measurement_cov)))
                 post = lambda lam_: np.abs(ctx.z - ctx.measurement.h(ctx.trial_update(lam_)[0], ctx.k)).max(axis=-1)  # noqa: E731
-                reached = faded & (lam < inner.lam_max)
+                reachable = post(np.full(lam.shape, inner.lam_max)) <= level
+                reached = faded & reachable
                 assert np.all(post(lam)[reached] <= level * (1 + 1e-9))
                 # a slightly smaller λ no longer fits: λ is (close to) the smallest
                 assert np.all(post(np.where(reached, lam * (1 - 1e-3), 1.0))[reached & (lam > 1.01)] > level)
+                # out of reach: the one-step innovation-matching factor, from full matrices
+                H, nu = ctx.jacobian, ctx.innovation
+                HPH = H @ ctx.propagated_cov @ np.swapaxes(H, -1, -2)
+                N = nu[..., :, None] * nu[..., None, :] - H @ ctx.process_cov @ np.swapaxes(H, -1, -2) - ctx.measurement_cov
+                lam_nu = np.clip(np.trace(N, axis1=-2, axis2=-1) / np.trace(HPH, axis1=-2, axis2=-1), 1.0, inner.lam_max)
+                out = faded & ~reachable
+                np.testing.assert_allclose(lam[out], lam_nu[out], rtol=1e-9)
                 checks["faded"] += int(faded.sum())
+                checks["unreachable"] += int(out.sum())
             return fade, memory
 
     sc = UnderwaterTOA(condition="actual", steps=40)
     sim = sc.simulate(run_streams(5, range(20), 0), 20)
     pu.run(pu.ExtendedKalmanFilter(sc.motion, sc.measurement, fading=Audit()), sim.measurements, sim.prior)
     assert checks["faded"] > 50
+    assert checks["unreachable"] > 0  # both branches are exercised
 
 
 def test_unreachable_minimise_keeps_sigma_point_filters_stable():
@@ -242,3 +279,94 @@ def test_unreachable_minimise_keeps_sigma_point_filters_stable():
         rmse = lambda t: np.sqrt(np.mean(np.sum((t.mean[..., :2] - sim.truth[..., :2]) ** 2, axis=-1)))  # noqa: E731
         assert track.info["faded"].any()
         assert np.isfinite(rmse(track)) and rmse(track) < rmse(plain)
+
+
+FULL_LENGTH = [
+    pytest.param("kf", "position", "actual", id="kf-position-actual"),
+    pytest.param("ekf", "ranges", "actual", id="ekf-actual"),
+    pytest.param("ukf", "ranges", "actual", id="ukf-actual"),
+    pytest.param("ckf", "ranges", "actual", id="ckf-actual"),
+    pytest.param("ekf", "ranges", "abnormal", id="ekf-abnormal"),
+    pytest.param("ukf", "ranges", "abnormal", id="ukf-abnormal"),
+    pytest.param("ckf", "ranges", "abnormal", id="ckf-abnormal"),
+]
+GAUSSIAN = {"kf": pu.KalmanFilter, "ekf": pu.ExtendedKalmanFilter, "ukf": pu.UnscentedKalmanFilter, "ckf": pu.CubatureKalmanFilter}
+
+
+@pytest.mark.parametrize("kind,mode,condition", FULL_LENGTH)
+def test_default_ifmkf_is_stable_and_not_worse_than_the_plain_filter_over_the_full_horizon(kind, mode, condition):
+    # With spec 03's unreachable = "lam_max" the UKF and CKF blew up here
+    # (position RMSE ~1e79 m, a third of the runs, between steps 9 and 45).
+    sc = UnderwaterTOA(condition=condition, mode=mode)  # the full 60 steps
+    runs = 40
+    sim = sc.simulate(run_streams(7, range(runs), 0), runs)
+    cls = GAUSSIAN[kind]
+    plain = pu.run(cls(sc.motion, sc.measurement), sim.measurements, sim.prior)
+    track = pu.run(cls(sc.motion, sc.measurement, fading=pu.Improved()), sim.measurements, sim.prior)
+    assert sc.steps == 60 and track.mean.shape[0] == 60
+    assert np.all(np.isfinite(track.mean)) and np.all(np.isfinite(track.cov))
+    if condition == "actual":
+        assert track.info["faded"].any()  # the comparison covers real fading
+
+    def per_run_rmse(t):
+        return np.sqrt(np.mean(np.sum((t.mean[..., :2] - sim.truth[..., :2]) ** 2, axis=-1), axis=0))
+
+    # Paired over runs (same truth and measurements): the one-sided 99.9 %
+    # upper confidence bound of the mean RMSE difference must be below zero.
+    d = per_run_rmse(track) - per_run_rmse(plain)
+    upper = d.mean() + stats.t.ppf(0.999, runs - 1) * d.std(ddof=1) / np.sqrt(runs)
+    assert upper < 0.0, (d.mean(), upper)
+
+
+def test_gated_step_info_describes_the_rejected_measurement():
+    # The contract of the Gaussian filters' step info (filters/gaussian.py): on a
+    # gated step the estimate is the prediction, while innovation, S, NIS, dof
+    # and loglik describe the measurement that was rejected, as for `gate=p`.
+    sc = UnderwaterTOA(condition="abnormal")
+    runs = 20
+    sim = sc.simulate(run_streams(4, range(runs), 0), runs)
+    filt = pu.ExtendedKalmanFilter(sc.motion, sc.measurement, fading=pu.Improved())
+    track = pu.run(filt, sim.measurements, sim.prior, store_predictions=True)
+    k = sc.outlier_step - 1
+    gated = track.info["gated"][k]
+    assert gated.all()
+    info = {key: track.info[key][k] for key in ("innovation", "S", "nis", "dof", "loglik", "pred_mean", "pred_cov")}
+    z, meas = sim.measurements[k], sc.measurement
+    nu = z - meas.h(info["pred_mean"], k + 1)
+    H = meas.jacobian(info["pred_mean"], k + 1)
+    S = H @ info["pred_cov"] @ np.swapaxes(H, -1, -2) + meas.cov(k + 1)
+    nis = np.einsum("...i,...ij,...j->...", nu, np.linalg.inv(S), nu)
+    np.testing.assert_allclose(info["innovation"], nu, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(info["S"], S, rtol=1e-10)
+    np.testing.assert_allclose(info["nis"], nis, rtol=1e-8)
+    assert np.all(info["dof"] == 3)
+    _, logdet = np.linalg.slogdet(S)
+    np.testing.assert_allclose(info["loglik"], -0.5 * (nis + logdet + 3 * np.log(2 * np.pi)), rtol=1e-8)
+    assert np.all(info["nis"] > 1e3)  # the +1 m outlier, now visible to NIS/ANIS
+    # ... and the estimate is the prediction (covariance symmetrised), with λ = 1
+    np.testing.assert_array_equal(track.mean[k], info["pred_mean"])
+    P = info["pred_cov"]
+    np.testing.assert_array_equal(track.cov[k], 0.5 * (P + np.swapaxes(P, -1, -2)))
+    assert np.array_equal(track.cov[k], np.swapaxes(track.cov[k], -1, -2))
+    assert np.all(track.info["fading"][k] == 1.0)
+
+
+def test_gated_step_info_equals_the_chi_square_gate_on_the_same_step():
+    # Both gates keep the prediction and report the rejected measurement: from
+    # the same state, on the outlier step, an EKF with a χ² gate reports the
+    # same numbers as IFMKF.
+    sc = UnderwaterTOA(condition="abnormal", steps=16)
+    sim = sc.simulate(run_streams(4, range(10), 0), 10)
+    ifm = pu.ExtendedKalmanFilter(sc.motion, sc.measurement, fading=pu.Improved())
+    chi = pu.ExtendedKalmanFilter(sc.motion, sc.measurement, gate=0.999)
+    state = ifm.init(sim.prior, batch=(10,))
+    k = sc.outlier_step
+    for i in range(k - 1):
+        state, _ = ifm.step(state, sim.measurements[i])
+    after_ifm, info_ifm = ifm.step(state, sim.measurements[k - 1])
+    after_chi, info_chi = chi.step(pu.filters.GaussianState(state.mean, state.cov, state.k), sim.measurements[k - 1])
+    assert info_ifm["gated"].all() and info_chi["gated"].all()
+    for key in ("innovation", "S", "nis", "dof", "loglik"):
+        np.testing.assert_array_equal(info_ifm[key], info_chi[key], err_msg=key)
+    np.testing.assert_array_equal(after_ifm.mean, after_chi.mean)
+    np.testing.assert_array_equal(after_ifm.cov, after_chi.cov)

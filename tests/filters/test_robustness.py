@@ -9,6 +9,18 @@ missing at random.  Before the sigma-point filters used the Joseph form
 here (the ukf-range and ckf-toa cases failed), and before the 3x3 inverse
 had its fallback for nearly singular S the TOA runs went to NaN.
 
+The fading variants (EWFMKF, STF, IFMKF on every filter) run the same
+scenario as 20 runs of 5000 steps.  Before the strategies kept λ under
+:attr:`pursuit.filters.FadingContext.lam_ceiling` they failed within 50
+steps: an innovation-driven λ reached 1e10 to 1e28 once a filter had lost
+the target after a long gap, the predicted covariance swamped R and S was
+singular (EKF+STF, EKF+IFMKF, UKF+STF: LinAlgError) or the covariances lost
+positive definiteness (CKF+EWFMKF: 66 repairs).  With the ceiling alone one
+EKF+EWFMKF run still died at step 1953: fading at a 0.01 s step had inflated
+the unmeasured velocity covariance, a 500 s gap turned it into 3e11 m² of
+position variance, and the 4x4 S was singular in floating point; since then
+``inv_spd`` pseudo-inverts such a matrix as its 3x3 closed forms always did.
+
 The maneuvering-target filters (CS, APCS, MS, the Singer-model KF and
 IMM-Singer) get 10^6 steps of their own long scenario: a 3-D maneuvering path
 at 200 km sampled every second, 1 mm position fixes, 20 % missing components
@@ -102,12 +114,44 @@ def test_a_million_steps_without_nan_or_loss_of_positive_definiteness(cls, senso
     _run_and_check(cls(motion, meas), z, dts, prior)
 
 
+FADING = {
+    "ewfmkf": pu.ExponentiallyWeighted,
+    "stf": pu.StrongTracking,
+    "ifmkf": pu.Improved,
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("strategy", list(FADING))
+@pytest.mark.parametrize("cls,sensor", LONG)
+def test_fading_variants_run_long_without_nan_or_loss_of_positive_definiteness(cls, sensor, strategy):
+    # 10^5 filter steps per variant (the existing 200 x 5000 would cost minutes
+    # each for IFMKF); the default parameters of every strategy.
+    motion, meas, z, dts, prior = long_scenario(sensor, runs=20, steps=STEPS)
+    _run_and_check(cls(motion, meas, fading=FADING[strategy]()), z, dts, prior)
+
+
 @pytest.mark.parametrize("cls", [pu.ExtendedKalmanFilter, pu.UnscentedKalmanFilter, pu.CubatureKalmanFilter], ids=lambda c: c.__name__)
 @pytest.mark.parametrize("sensor", ["range", "toa"])
 def test_short_hard_runs_for_every_filter_and_sensor(cls, sensor):
     # The long test above covers one sensor per filter; this covers the rest, briefly.
     motion, meas, z, dts, prior = long_scenario(sensor, runs=20, steps=1000, seed=2, gap_rate=5e-3)
     _run_and_check(cls(motion, meas), z, dts, prior)
+
+
+@pytest.mark.parametrize("strategy", list(FADING))
+@pytest.mark.parametrize(
+    "cls,sensor",
+    [
+        pytest.param(pu.ExtendedKalmanFilter, "toa", id="ekf-toa"),
+        pytest.param(pu.UnscentedKalmanFilter, "toa", id="ukf-toa"),
+        pytest.param(pu.CubatureKalmanFilter, "range", id="ckf-range"),
+    ],
+)
+def test_short_hard_runs_for_the_fading_variants_on_the_other_sensors(cls, sensor, strategy):
+    # The long fading test covers one sensor per filter; this covers the rest, briefly.
+    motion, meas, z, dts, prior = long_scenario(sensor, runs=20, steps=1000, seed=2, gap_rate=5e-3)
+    _run_and_check(cls(motion, meas, fading=FADING[strategy]()), z, dts, prior)
 
 
 # --------------------------------------------------------------------------

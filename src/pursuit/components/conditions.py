@@ -247,8 +247,13 @@ class ConditionsPlan:
                 title=f"Position RMSE over {r.runs} runs\n{c.title}",
             )
         if self.figure_opts["fading"]:
+            # The median, not the mean: a few runs at λ_max dominate the mean of IFMKF's λ.
             figs["fading_factor"] = fading_over_time(
-                {c.title: results[c.name] for c in self.conditions}, events=events, title="Fading factor λ (mean over runs)"
+                {c.title: results[c.name] for c in self.conditions},
+                statistic="median",
+                share=True,
+                events=events,
+                title="Fading factor λ: median over runs (left), share of runs that faded (right)",
             )
         return figs
 

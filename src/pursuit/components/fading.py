@@ -1,35 +1,27 @@
 """Fading-strategy registrations: ``fading = {type = "...", ...}`` in a filter entry.
 
-The ``constant`` strategy (TFMKF) is registered with the filters, which also
+The constant strategies (``constant``, ``tfmkf``) are registered with the filters, which also
 accept a bare number; the adaptive strategies are here.
 """
 
 from __future__ import annotations
 
-import numpy as np
-
-from ..filters.fading_adaptive import ExponentiallyWeighted, StrongTracking
+from ..filters.fading_adaptive import LAM_MAX, ExponentiallyWeighted, StrongTracking
 from ..filters.ifmkf import SEARCHES, TESTS, UNREACHABLE, Improved
 from ..registry import Param, register
 
-LAM_MAX = Param("lam_max", "float", None, "upper bound on the fading factor (default: none)")
-
-
-def _no_bound(kw: dict) -> dict:
-    if kw.get("lam_max") is None:
-        kw["lam_max"] = np.inf
-    return kw
+LAM_MAX_PARAM = Param("lam_max", "float", LAM_MAX, "upper bound on the fading factor (e.g. 1e300: only the numerical ceiling)")
 
 
 @register(
     "fading",
     "ewfmkf",
     "Exponentially weighted adaptive fading factor (EWFMKF, paper P2 baseline; reconstruction)",
-    params=(Param("b", "float", 0.95, "forgetting factor in (0, 1); larger remembers longer"), LAM_MAX),
+    params=(Param("b", "float", 0.95, "forgetting factor in (0, 1); larger remembers longer"), LAM_MAX_PARAM),
     aliases=("exponentially-weighted",),
 )
 def _ewfmkf(**kw) -> ExponentiallyWeighted:
-    return ExponentiallyWeighted(**_no_bound(kw))
+    return ExponentiallyWeighted(**kw)
 
 
 @register(
@@ -39,12 +31,12 @@ def _ewfmkf(**kw) -> ExponentiallyWeighted:
     params=(
         Param("rho", "float", 0.95, "forgetting factor in (0, 1]"),
         Param("beta", "float", 1.0, "weakening factor on R, at least 1"),
-        LAM_MAX,
+        LAM_MAX_PARAM,
     ),
     aliases=("strong-tracking",),
 )
 def _stf(**kw) -> StrongTracking:
-    return StrongTracking(**_no_bound(kw))
+    return StrongTracking(**kw)
 
 
 @register(
@@ -57,14 +49,20 @@ def _stf(**kw) -> StrongTracking:
         Param("test", "str", "window", "divergence test: windowed median and slope, instantaneous, or whole-process mean", choices=TESTS),
         Param("hysteresis", "bool", True, "stay diverging while the windowed median exceeds the threshold"),
         Param("search", "str", "consistent", "lambda when diverging: noise-consistent bisection, grid minimum, or strong tracking", choices=SEARCHES),
-        Param("lam_max", "float", 1.0e4, "largest fading factor considered"),
+        Param("lam_max", "float", LAM_MAX, "largest fading factor considered"),
         Param("iterations", "int", 20, "bisection steps on log lambda"),
         Param("grid", "int", 200, "log-grid points (search = minimise, and the bisection's fallback)"),
         Param("gate", "bool", True, "skip the update for an isolated outlier"),
         Param("gate_factor", "float", 10.0, "a residual above gate_factor * threshold is an outlier"),
         Param("gate_max", "int", 2, "at most this many consecutive gated steps"),
         Param("rho", "float", 0.95, "forgetting factor for search = stf"),
-        Param("unreachable", "str", "lam_max", "if lam_max cannot fit the observation: use lam_max, or the grid minimiser", choices=UNREACHABLE),
+        Param(
+            "unreachable",
+            "str",
+            "innovation",
+            "if lam_max cannot fit the observation: the one-step innovation-matching factor, lam_max, or the grid minimiser",
+            choices=UNREACHABLE,
+        ),
     ),
     aliases=("improved",),
 )

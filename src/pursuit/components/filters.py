@@ -45,9 +45,23 @@ def build_fading(field: str, value: Any):
 register(
     "fading",
     "constant",
-    "Constant fading factor λ (TFMKF); λ = 1 is the plain filter",
+    "Constant fading factor λ; λ = 1 is the plain filter (a bare number means the same)",
     params=(Param("lam", "float", 1.0, "fading factor, at least 1"),),
 )(Constant)
+
+TFMKF_LAMBDA = 1.23
+"""Paper P2's constant fading factor for TFMKF (from its ref. [12]; spec 03 §4.1)."""
+
+
+@register(
+    "fading",
+    "tfmkf",
+    f"Constant fading factor of paper P2's TFMKF, λ = {TFMKF_LAMBDA} unless given",
+    params=(Param("lam", "float", TFMKF_LAMBDA, "fading factor, at least 1"),),
+)
+def _tfmkf(lam: float = TFMKF_LAMBDA) -> Constant:
+    """TFMKF: :class:`~pursuit.filters.fading.Constant` with paper P2's λ = 1.23 as the default."""
+    return Constant(lam)
 
 NAME = Param("name", "str", None, "label in tables and figures (default: the filter's short name)")
 BACKEND = Param(

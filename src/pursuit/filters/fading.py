@@ -35,7 +35,10 @@ import numpy as np
 
 from .._validation import in_range
 
-__all__ = ["Fade", "FadingContext", "FadingStrategy", "Constant", "NoFading"]
+__all__ = ["Fade", "FadingContext", "FadingStrategy", "Constant", "NoFading", "CONDITION_LIMIT"]
+
+CONDITION_LIMIT = 1.0 / np.sqrt(np.finfo(float).eps)
+"""κ ≈ 6.7e7: the adaptive strategies keep λ·tr(H P̄ Hᵀ) ≤ κ·tr(R) (see :attr:`FadingContext.lam_ceiling`)."""
 
 
 @dataclass(frozen=True)
@@ -48,7 +51,9 @@ class Fade:
         Fading factor λ ≥ 1, a scalar or ``(*batch,)``.
     skip
         Optional ``(*batch,)`` boolean: runs whose measurement update is
-        skipped this step (an outlier gate); they only predict.
+        skipped this step (an outlier gate); they only predict, while the
+        step info (``innovation``, ``S``, ``nis``, ``dof``, ``loglik``) still
+        describes the measurement they rejected.
     info
         Extra per-step diagnostics, copied into the filter's step info.
     """
@@ -132,6 +137,34 @@ class FadingContext:
         if self._linearize is None:
             return self.jacobian
         return self._linearize()
+
+    @cached_property
+    def lam_ceiling(self) -> np.ndarray:
+        """``(*batch,)``: the largest λ the adaptive strategies use, max(1, κ tr R / tr(H P̄ Hᵀ)).
+
+        Traces over every component of the measurement model, measured at
+        this step or not (a component missing now must not let its block of
+        P̄ grow without bound and meet a precise measurement later), H the
+        filter's :attr:`linearization`, κ = :data:`CONDITION_LIMIT` =
+        1/√ε ≈ 6.7e7; infinite where tr(H P̄ Hᵀ) = 0.  Below the
+        ceiling the faded part of the innovation covariance
+        S = λ H P̄ Hᵀ + H Q Hᵀ + R stays within κ of R, the classic limit for
+        covariance-form Kalman arithmetic.  At the ceiling the prediction
+        already weighs less than 1/κ against the measurement in the measured
+        directions, so a larger λ hardly changes the estimate there; it only
+        inflates the covariance of what is not measured (a velocity measured
+        through positions) until R is lost to round-off and S is singular.
+        An innovation-driven λ reaches such values when a filter has lost
+        the target or after a short step that follows a long one (measured:
+        λ up to 1e10 for STF, position variance 1e12 m² against R = 1e-6 m²).
+        """
+        from .fading_adaptive import diag_sandwich
+
+        batch = self.z.shape[:-1]
+        tr_r = np.broadcast_to(np.trace(self.measurement_cov, axis1=-2, axis2=-1), batch)
+        tr_m = np.broadcast_to(diag_sandwich(self.linearization, self.propagated_cov).sum(axis=-1), batch)
+        bound = np.divide(CONDITION_LIMIT * tr_r, tr_m, out=np.full(batch, np.inf), where=tr_m > 0)
+        return np.maximum(bound, 1.0)
 
     def trial_update(self, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The filter's update with ``P⁻ = lam·P̄ + Q``: returns (mean, cov)."""

@@ -4,7 +4,7 @@ Both strategies compare the covariance of the innovations the filter actually
 sees with the one it predicts, and fade when the actual one is larger:
 
     N_k = Ĉ_k − H_k Q_k H_kᵀ − β R_k,     M_k = H_k P̄_k H_kᵀ,
-    λ_k = min(λ_max, max(1, tr N_k / tr M_k)),
+    λ_k = min(λ_max, ceiling_k, max(1, tr N_k / tr M_k)),
 
 where P̄_k = F P_{k−1} Fᵀ is the propagated covariance before Q and Ĉ_k is
 a running estimate of E[ν_k ν_kᵀ] (ν_k = z_k − h(x̂⁻_k)).  With λ_k in place
@@ -17,6 +17,15 @@ of 1, the filter's predicted innovation covariance H(λ P̄ + Q)Hᵀ + R matches
 * :class:`StrongTracking` (Zhou Donghua's suboptimal fading factor; spec 03
   §4.3): V_1 = ν_1ν_1ᵀ, V_j = (ρ V_{j−1} + ν_jν_jᵀ)/(1 + ρ), with a weakening
   factor β ≥ 1 on R.
+
+λ_max defaults to :data:`LAM_MAX` = 1e4, the bound spec 03 gives IFMKF, and
+the numerical ceiling max(1, κ tr R / tr(H P̄ Hᵀ)) (κ = 1/√ε, see
+:attr:`~pursuit.filters.fading.FadingContext.lam_ceiling`) applies whatever
+λ_max is.  Both bind only far from the TOA experiments' values (λ of order
+10² to 10⁴), but without them the trace ratio reaches 1e10 to 1e28 once a
+filter has lost the target on irregularly sampled data (a short step after
+a long one, where P̄ is tiny against the innovations remembered in Ĉ), and
+the covariances lose positive definiteness (tests/filters/test_robustness.py).
 
 Only traces enter λ, so only the diagonals of Ĉ, HQHᵀ, R and HP̄Hᵀ are
 computed.  j counts the steps at which something was measured; a missing
@@ -34,7 +43,10 @@ import numpy as np
 from .._validation import in_range
 from .fading import Fade, FadingContext
 
-__all__ = ["ExponentiallyWeighted", "StrongTracking", "TraceMemory", "diag_sandwich"]
+__all__ = ["ExponentiallyWeighted", "StrongTracking", "TraceMemory", "diag_sandwich", "LAM_MAX"]
+
+LAM_MAX = 1.0e4
+"""Default upper bound on λ of the adaptive strategies (EWFMKF, STF, IFMKF): spec 03 §4.4's λ_max."""
 
 
 def diag_sandwich(H: np.ndarray, A: np.ndarray) -> np.ndarray:
@@ -59,8 +71,8 @@ class TraceMemory:
     count: np.ndarray
 
 
-def _trace_ratio(ctx: FadingContext, second_moment: np.ndarray, beta: float, lam_max: float) -> np.ndarray:
-    """λ = min(λ_max, max(1, tr N / tr M)) over the measured components."""
+def _trace_ratio(ctx: FadingContext, second_moment: np.ndarray, beta: float, lam_max: float | np.ndarray) -> np.ndarray:
+    """λ = min(λ_max, ceiling, max(1, tr N / tr M)) over the measured components (ceiling: ``ctx.lam_ceiling``)."""
     H = ctx.linearization
     valid = ctx.measured
     hqh = diag_sandwich(H, ctx.process_cov)
@@ -70,7 +82,7 @@ def _trace_ratio(ctx: FadingContext, second_moment: np.ndarray, beta: float, lam
     tr_m = np.where(valid, hph, 0.0).sum(axis=-1)
     # tr M = 0 (nothing measured, or no propagated uncertainty): no fading.
     ratio = np.divide(tr_n, tr_m, out=np.ones_like(tr_n), where=tr_m > 0)
-    return np.minimum(np.maximum(ratio, 1.0), lam_max)
+    return np.minimum(np.maximum(ratio, 1.0), np.minimum(lam_max, ctx.lam_ceiling))
 
 
 def _update_moment(ctx: FadingContext, memory: TraceMemory, weight_new) -> TraceMemory:
@@ -95,7 +107,7 @@ class ExponentiallyWeighted:
     d_j = (1 − b)/(1 − b^{j+1}) (j = measured steps so far; d_0 = 1), so
 
         Ĉ_j = (1 − d_j) Ĉ_{j−1} + d_j ν_j ν_jᵀ,
-        λ_k = min(λ_max, max(1, tr(Ĉ − HQHᵀ − R) / tr(H P̄ Hᵀ))).
+        λ_k = min(λ_max, ceiling, max(1, tr(Ĉ − HQHᵀ − R) / tr(H P̄ Hᵀ))).
 
     Paper P2 gives only the name, a parameter b in (0, 1) and its reference
     [14]; this form is the reconstruction of spec 03 §4.2 [RECON + LIT].
@@ -105,11 +117,12 @@ class ExponentiallyWeighted:
     b
         Forgetting factor in (0, 1); larger b remembers longer (default 0.95).
     lam_max
-        Upper bound on λ (default unbounded; 1 gives the plain filter).
+        Upper bound on λ (default :data:`LAM_MAX` = 1e4; ``inf``: only the
+        numerical ceiling; 1 gives the plain filter).
     """
 
     b: float = 0.95
-    lam_max: float = np.inf
+    lam_max: float = LAM_MAX
     data_independent: bool = field(default=False, init=False)
 
     def __post_init__(self) -> None:
@@ -135,7 +148,7 @@ class StrongTracking:
     """STF: Zhou Donghua's single suboptimal fading factor.
 
         V_1 = ν_1ν_1ᵀ,   V_j = (ρ V_{j−1} + ν_jν_jᵀ)/(1 + ρ),
-        λ_k = min(λ_max, max(1, tr(V − HQHᵀ − β R) / tr(H P̄ Hᵀ))).
+        λ_k = min(λ_max, ceiling, max(1, tr(V − HQHᵀ − β R) / tr(H P̄ Hᵀ))).
 
     Parameters
     ----------
@@ -145,12 +158,13 @@ class StrongTracking:
         Weakening factor β ≥ 1 on R (default 1): larger β fades less and
         smooths the estimate.
     lam_max
-        Upper bound on λ (default unbounded; 1 gives the plain filter).
+        Upper bound on λ (default :data:`LAM_MAX` = 1e4; ``inf``: only the
+        numerical ceiling; 1 gives the plain filter).
     """
 
     rho: float = 0.95
     beta: float = 1.0
-    lam_max: float = np.inf
+    lam_max: float = LAM_MAX
     data_independent: bool = field(default=False, init=False)
 
     def __post_init__(self) -> None:

@@ -126,11 +126,11 @@ def motion_jacobian(motion: Any, x: np.ndarray, k: int, dt: float | None = None)
 
 
 def measurement_jacobian(measurement: Any, x: np.ndarray, k: int) -> np.ndarray:
-    """∂h/∂x at ``x``: the model's own Jacobian, else central differences."""
+    """∂h/∂x at ``x``: the model's own Jacobian, else central differences (through its ``residual``, if any)."""
     jac = getattr(measurement, "jacobian", None)
     if jac is not None:
         return np.asarray(jac(x, k), dtype=float)
-    return numerical_jacobian(lambda xs: measurement.h(xs, k), x)
+    return numerical_jacobian(lambda xs: measurement.h(xs, k), x, residual=getattr(measurement, "residual", None))
 
 
 def _residual(measurement: Any, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -321,11 +321,12 @@ class _GaussianFilter:
         lam = np.asarray(fade.lam, dtype=float)
         P_pred = _scale(lam, pred.propagated) + pred.Q
 
-        valid = ~np.isnan(z)
-        if fade.skip is not None:
-            valid = valid & ~np.asarray(fade.skip, dtype=bool)[..., None]
         meas = self._measure(pred.mean, P_pred, k)
-        mean, cov, info = _update(pred.mean, P_pred, z, valid, meas, self.measurement, k)
+        mean, cov, info = _update(pred.mean, P_pred, z, ~np.isnan(z), meas, self.measurement, k)
+        if fade.skip is not None:
+            # The strategy's own gate: those runs keep the prediction, while the
+            # info still describes the measurement they rejected (as for `gate`).
+            mean, cov = _keep_prediction(np.asarray(fade.skip, dtype=bool), pred.mean, P_pred, mean, cov)
         gated = np.zeros(batch, dtype=bool)
         if self.gate is not None:
             mean, cov, gated = _apply_gate(self.gate, info, pred.mean, P_pred, mean, cov)
@@ -374,12 +375,22 @@ def _apply_gate(gate, info, x_pred, P_pred, mean, cov):
     nis, dof = info["nis"], info["dof"]
     thresholds = chi2_gate_thresholds(gate, info["innovation"].shape[-1])
     gated = np.asarray(nis > thresholds[dof])  # NaN NIS (nothing measured) is never gated
-    if not gated.any():
-        return mean, cov, gated
-    n = mean.shape[-1]
-    mean = np.where(gated[..., None], x_pred, mean)
-    cov = np.where(gated[..., None, None], np.broadcast_to(P_pred, (*gated.shape, n, n)), cov)
+    mean, cov = _keep_prediction(gated, x_pred, P_pred, mean, cov)
     return mean, cov, gated
+
+
+def _keep_prediction(mask, x_pred, P_pred, mean, cov):
+    """The predicted mean and covariance where ``mask`` (``(*b,)``) is True, the update elsewhere.
+
+    The kept covariance is symmetrised like every updated one (F P Fᵀ is
+    symmetric only to round-off).
+    """
+    if not mask.any():
+        return mean, cov
+    n = mean.shape[-1]
+    mean = np.where(mask[..., None], x_pred, mean)
+    cov = np.where(mask[..., None, None], np.broadcast_to(symmetrize(P_pred), (*mask.shape, n, n)), cov)
+    return mean, cov
 
 
 def _any_repaired(batch, *flags) -> np.ndarray:
@@ -641,7 +652,9 @@ class UnscentedKalmanFilter(_SigmaPointFilter):
         As :class:`ExtendedKalmanFilter`.
     alpha, beta, kappa
         Sigma-point spread, prior-knowledge and secondary scaling parameters
-        (defaults 1, 2, 0: weights are non-negative for any n).  With
+        (defaults 1, 2, 0: weights are non-negative for any n).  ``kappa``
+        must satisfy n + κ > 0 (checked at construction when the motion
+        model has ``dim``).  With
         λ_ut = α²(n + κ) − n the points are x ± √(n + λ_ut)·(columns of
         chol P), W₀ᵐ = λ_ut/(n + λ_ut), W₀ᶜ = W₀ᵐ + 1 − α² + β,
         Wᵢ = 1/(2(n + λ_ut)).
@@ -661,6 +674,11 @@ class UnscentedKalmanFilter(_SigmaPointFilter):
         in_range("alpha", self.alpha, 0.0, 1.0e3, low_open=True)
         nonnegative("beta", self.beta)
         in_range("kappa", self.kappa, -1.0e6, 1.0e6)
+        n = getattr(self.motion, "dim", None)  # a user's model may not say; _weights checks again
+        if isinstance(n, (int, np.integer)) and not n + self.kappa > 0:
+            raise ValueError(
+                f"kappa: must exceed -n = {-n} for the {n}-dimensional state (n + kappa > 0 keeps the sigma points real), got {self.kappa!r}"
+            )
 
     def _default_name(self) -> str:
         return "UKF"

@@ -131,6 +131,7 @@ def fading_over_time(
     log: bool = True,
     events: dict[str, Sequence[tuple[float, str]]] | None = None,
     title: str | None = None,
+    share: bool = False,
 ) -> Figure:
     """The fading factor λ_k against time, one panel per result (e.g. per condition).
 
@@ -142,21 +143,30 @@ def fading_over_time(
     filters
         Subset and order of filters (default: those that recorded λ).
     statistic
-        ``"mean"`` or ``"median"`` of λ over the runs at each step.
+        ``"mean"`` or ``"median"`` of λ over the runs at each step.  The mean
+        of a strategy that fades hard in a few runs (IFMKF saturating at
+        λ_max) is dominated by those runs; the median with ``share`` shows
+        what a typical run does and how many runs fade.
     log
         Logarithmic λ axis.
     events
         Optional ``{panel title: [(time, label), ...]}`` to mark.
     title
         Figure title.
+    share
+        Add a second column with the share of runs that faded (λ > 1) at
+        each step, in percent.
     """
     if statistic not in ("mean", "median"):
         raise ValueError(f"statistic: must be 'mean' or 'median', got {statistic!r}")
     reduce = np.mean if statistic == "mean" else np.median
     panels = list(results.items())
-    fig = Figure(figsize=(6.4, 2.6 * max(len(panels), 1) + 0.6), layout="constrained")
-    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
-    for ax, (panel, result) in zip(axes, panels):
+    ncols = 2 if share else 1
+    fig = Figure(figsize=(6.4 * (1.7 if share else 1.0), 2.6 * max(len(panels), 1) + 0.6), layout="constrained")
+    grid = fig.subplots(len(panels), ncols, sharex=True, squeeze=False)
+    axes = grid[:, 0]
+    for row, (panel, result) in zip(grid, panels):
+        ax = row[0]
         names = list(filters) if filters is not None else result.filter_names
         for name in names:
             if "fading" not in result.info_keys(name):
@@ -167,14 +177,23 @@ def fading_over_time(
                 if result.store != "full":
                     raise ValueError("statistic='median' needs every run's fading factors (store='full')")
                 values = reduce(result.filters[name].info["fading"], axis=1)
-            ax.plot(result.times, values, label=name, linewidth=1.3)
+            (line,) = ax.plot(result.times, values, label=name, linewidth=1.3)
+            if share:
+                faded = 100.0 * np.asarray(result.info_mean(name, "faded"), dtype=float)
+                row[1].plot(result.times, faded, label=name, linewidth=1.3, color=line.get_color())
         if log:
             ax.set_yscale("log")
         ax.set_ylabel(f"{statistic} λ")
         ax.set_title(panel, fontsize=10)
-        mark_events(ax, (events or {}).get(panel, ()))
-        ax.grid(True, alpha=0.3)
-    axes[-1].set_xlabel("time (s)")
+        for a in row:
+            mark_events(a, (events or {}).get(panel, ()))
+            a.grid(True, alpha=0.3)
+        if share:
+            row[1].set_ylabel("runs faded (%)")
+            row[1].set_ylim(-3.0, 103.0)
+            row[1].set_title("share of runs with λ > 1", fontsize=10)
+    for a in grid[-1]:
+        a.set_xlabel("time (s)")
     axes[0].legend(fontsize=8, ncol=3)
     if title:
         fig.suptitle(title)
