@@ -31,8 +31,9 @@ Stone Soup's particle filter is not measured: it filters one run at a time
 through Python objects per step, and at N = 1000 a single run of the UNGM
 work takes minutes on this machine kind.
 
-numpy and BLAS are used single-threaded only if the caller sets
-``OMP_NUM_THREADS=1``; the PF code itself is single-threaded NumPy.
+NumPy's BLAS runs on one thread when this runs through ``benchmarks/run.py``
+(``make bench``), which pins it before NumPy is imported; the PF code itself
+is single-threaded NumPy.
 """
 
 from __future__ import annotations
