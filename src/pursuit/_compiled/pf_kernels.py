@@ -438,30 +438,14 @@ def _fast_run(r, X, logw, logN, noise, addrs, per_run, mk, F, G, par, hk, A, idx
 
 
 @njit(cache=True, error_model="numpy")
-def systematic_fill(e, s, u0, src, dst):
-    """Systematic resampling of a 1-D particle set without branches.
-
-    With b_i = ceil(N c_i − u0) the positions (u0 + j)/N below cumulative
-    weight c_i, output j takes particle #{i: b_i <= j}: a histogram of the
-    b_i, a running sum, a gather.  c_i are the cumulative sums of ``e``
-    divided by their total ``s`` (the last exactly 1), as the NumPy resampler.
-    """
-    N = e.shape[0]
-    hist = np.zeros(N + 1, dtype=np.int64)
-    acc = 0.0
-    for i in range(N - 1):
-        acc += e[i]
-        hist[int(math.ceil((acc / s) * N - u0))] += 1
-    hist[N] += 1
-    p = 0
-    for j in range(N):
-        p += hist[j]
-        dst[j] = src[p]
-
-
-@njit(cache=True, error_model="numpy")
 def systematic_fill_cdf(c, u0, src, dst):
-    """:func:`systematic_fill` from the cumulative weights ``c`` (their last entry is the total)."""
+    """Systematic resampling of a 1-D particle set without branches, from the cumulative weights ``c``.
+
+    With b_i = ceil(N c_i / c_N − u0) the positions (u0 + j)/N below the
+    normalised cumulative weight of particle i, output j takes particle
+    #{i: b_i <= j}: a histogram of the b_i, a running sum, a gather.  The
+    last normalised weight is exactly 1, as in the NumPy resampler.
+    """
     N = c.shape[0]
     s = c[N - 1]
     hist = np.zeros(N + 1, dtype=np.int64)
@@ -476,7 +460,7 @@ def systematic_fill_cdf(c, u0, src, dst):
 
 @njit(cache=True, error_model="numpy")
 def systematic_fill_rows(e, s, u0, src, dst):
-    """:func:`systematic_fill` for particles with n components (rows of ``src``)."""
+    """:func:`systematic_fill_cdf` for particles with n components (rows of ``src``), from the weights ``e`` and their running total ``s``."""
     N, n = src.shape
     hist = np.zeros(N + 1, dtype=np.int64)
     acc = 0.0
