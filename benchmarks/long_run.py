@@ -71,34 +71,44 @@ def _factors(c: np.ndarray) -> bool:
         return False
 
 
-def maneuver_run(name: str, steps: int = 10**6) -> None:
-    """One run of ``steps`` steps of a maneuvering-target filter on the long maneuvering scenario."""
-    meas, z, dts, prior = long_maneuver_scenario(runs=1, steps=steps)
-    filt = MANEUVER_FILTERS[name](meas)
+def _single_run(label: str, filt, z: np.ndarray, dts: np.ndarray, prior, fading: bool) -> None:
+    """Step ``filt`` through one long run, checking every covariance; print one summary line."""
     state = filt.init(prior, (1,))
     n = prior.dim
     covs = np.empty((1000, 1, n, n))
     repaired = not_pd = 0
     finite = True
     worst = np.inf
+    lam_max = 1.0
+    faded = 0
     t0 = time.perf_counter()
+    error = ""
     for i in range(z.shape[0]):
-        state, info = filt.step(state, z[i], dt=float(dts[i]))
+        try:
+            state, info = filt.step(state, z[i], dt=float(dts[i]))
+        except (np.linalg.LinAlgError, ValueError) as e:
+            error = f", FAILED at step {i + 1}: {type(e).__name__}: {e}"
+            break
         repaired += int(np.count_nonzero(info["repaired"]))
+        if fading:
+            lam = float(np.max(info["fading"]))
+            lam_max = max(lam_max, lam)
+            faded += lam > 1.0
         covs[i % 1000] = state.cov
         if i % 1000 == 999 or i == z.shape[0] - 1:
-            block = covs[: i % 1000 + 1]
-            finite &= bool(np.all(np.isfinite(block)) and np.all(np.isfinite(state.mean)))
-            w = np.linalg.eigvalsh(block)
+            chunk = covs[: i % 1000 + 1]
+            finite &= bool(np.all(np.isfinite(chunk)) and np.all(np.isfinite(state.mean)))
+            w = np.linalg.eigvalsh(chunk)
             worst = min(worst, float(np.min(w[..., 0] / w[..., -1])))
             try:
-                np.linalg.cholesky(block)
+                np.linalg.cholesky(chunk)
             except np.linalg.LinAlgError:
-                not_pd += sum(1 for c in block.reshape(-1, n, n) if not _factors(c))
+                not_pd += sum(1 for c in chunk.reshape(-1, n, n) if not _factors(c))
     wall = time.perf_counter() - t0
+    extra = f", faded_steps={faded}, max_lambda={lam_max:.3g}" if fading else ""
     print(
-        f"{name} (maneuver): {z.shape[0]} steps in one run, {wall:.0f} s, repaired={repaired}, "
-        f"cholesky_failures={not_pd}, all_finite={finite}, min_eig_ratio={worst:.3g}",
+        f"{label}: {z.shape[0]} steps in one run, {wall:.0f} s, repaired={repaired}, "
+        f"cholesky_failures={not_pd}, all_finite={finite}, min_eig_ratio={worst:.3g}{extra}{error}",
         flush=True,
     )
 
@@ -110,49 +120,15 @@ def main(argv: list[str]) -> int:
         steps = int(argv[i + 1])
         argv = argv[:i] + argv[i + 2 :]
     for name in _expand(argv):
-        if name in MANEUVER_FILTERS:
-            maneuver_run(name, steps)
+        if name in MANEUVER_FILTERS:  # the long maneuvering scenario
+            meas, z, dts, prior = long_maneuver_scenario(runs=1, steps=steps)
+            _single_run(f"{name} (maneuver)", MANEUVER_FILTERS[name](meas), z, dts, prior, fading=False)
             continue
         f, _, strategy = name.partition("+")
         cls, sensor = FILTERS[f]
         motion, meas, z, dts, prior = long_scenario(sensor, runs=1, steps=steps)
         filt = cls(motion, meas, fading=FADING[strategy]()) if strategy else cls(motion, meas)
-        state = filt.init(prior, (1,))
-        covs = np.empty((1000, 1, 4, 4))
-        repaired = not_pd = 0
-        finite = True
-        worst = np.inf
-        lam_max = 1.0
-        faded = 0
-        t0 = time.perf_counter()
-        error = ""
-        for i in range(z.shape[0]):
-            try:
-                state, info = filt.step(state, z[i], dt=float(dts[i]))
-            except (np.linalg.LinAlgError, ValueError) as e:
-                error = f", FAILED at step {i + 1}: {type(e).__name__}: {e}"
-                break
-            repaired += int(np.count_nonzero(info["repaired"]))
-            lam = float(np.max(info["fading"]))
-            lam_max = max(lam_max, lam)
-            faded += lam > 1.0
-            covs[i % 1000] = state.cov
-            if i % 1000 == 999 or i == z.shape[0] - 1:
-                chunk = covs[: i % 1000 + 1]
-                finite &= bool(np.all(np.isfinite(chunk)) and np.all(np.isfinite(state.mean)))
-                w = np.linalg.eigvalsh(chunk)
-                worst = min(worst, float(np.min(w[..., 0] / w[..., -1])))
-                try:
-                    np.linalg.cholesky(chunk)
-                except np.linalg.LinAlgError:
-                    not_pd += sum(1 for c in chunk.reshape(-1, 4, 4) if not _factors(c))
-        wall = time.perf_counter() - t0
-        extra = f", faded_steps={faded}, max_lambda={lam_max:.3g}" if strategy else ""
-        print(
-            f"{name} ({sensor}): {z.shape[0]} steps in one run, {wall:.0f} s, repaired={repaired}, "
-            f"cholesky_failures={not_pd}, all_finite={finite}, min_eig_ratio={worst:.3g}{extra}{error}",
-            flush=True,
-        )
+        _single_run(f"{name} ({sensor})", filt, z, dts, prior, fading=bool(strategy))
     return 0
 
 

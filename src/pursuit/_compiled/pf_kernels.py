@@ -26,7 +26,6 @@ from numba import njit, prange
 
 from .common import (
     EXP_FLOOR,
-    exp_weight,
     LOG_2PI,
     M_LINEAR,
     M_UNGM,
@@ -35,6 +34,7 @@ from .common import (
     chol_quad,
     cholesky_inplace,
     copy_by_counts,
+    exp_weight,
     h_one,
     n_uniforms,
     resample_counts,
