@@ -241,29 +241,39 @@ def test_builtin_experiments_agree(name, monkeypatch):
 
 
 def test_second_process_loads_compiled_code_from_the_cache(tmp_path):
-    """cache=True: after one process compiled the kernels, a fresh one loads them (cache hits, no misses)."""
+    """cache=True: after one process compiled the kernels, a fresh one loads them (cache hits, no misses).
+
+    This covers the package's kernels and the generated linear-KF kernels, which live in
+    ``PURSUIT_KERNEL_DIR`` (a fresh folder here, so the first process must write them).
+    """
     code = r"""
 import numpy as np, pursuit as pu, warnings
 from pursuit.rng import run_streams
 from pursuit.scenarios.ungm import UNGM
-from pursuit._compiled import pf_kernels as K, gauss_kernels as GK
-from pursuit.models import ConstantVelocity, LinearGaussian
+from pursuit._compiled import pf_kernels as K, gauss_kernels as GK, generated
+from pursuit.models import ConstantVelocity, LinearGaussian, RangeSensors
 sc = UNGM(steps=3); sim = sc.simulate(run_streams(1, range(2), 0), 2)
 pu.run(pu.BootstrapParticleFilter(sc.motion, sc.measurement, particles=50, backend="numba"), sim.measurements, sim.prior, rng=run_streams(2, range(2), 1))
 mot = ConstantVelocity(); meas = LinearGaussian.position(4, (0, 2), 1.0)
+prior = pu.Gaussian(np.array([1.0, 0.0, 1.0, 0.0]), np.eye(4))
 kf = pu.KalmanFilter(mot, meas, backend="numba")
-pu.run(kf, np.zeros((3, 2, 2)), pu.Gaussian(np.zeros(4), np.eye(4)))
-pu.run(kf, np.zeros((3, 2, 2)), pu.Gaussian(np.zeros(4), np.eye(4)), sequence=False)
-for d in (K.pf_step_parallel, GK.ekf_sequence_parallel, GK.ekf_step_parallel):
+pu.run(kf, np.zeros((3, 2, 2)), prior)
+pu.run(kf, np.zeros((3, 2, 2)), prior, sequence=False)
+ekf = pu.ExtendedKalmanFilter(mot, RangeSensors([[0.0, 0.0], [50.0, 0.0]], 1.0, (0, 2)), backend="numba")
+pu.run(ekf, np.full((3, 2, 2), 10.0), prior)
+pu.run(ekf, np.full((3, 2, 2), 10.0), prior, sequence=False)
+(gen,) = generated._modules.values()
+for d in (K.pf_step_parallel, GK.ekf_sequence_parallel, GK.ekf_step_parallel, gen.sequence_parallel, gen.step_parallel):
     print(d.__name__ if hasattr(d, "__name__") else d, dict(d.stats.cache_hits), dict(d.stats.cache_misses))
 """
-    env = dict(os.environ)
+    env = dict(os.environ, PURSUIT_KERNEL_DIR=str(tmp_path / "kernels"))
     first = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env=env)
     assert first.returncode == 0, first.stderr
+    assert any(p.suffix == ".py" for p in (tmp_path / "kernels").iterdir())
     second = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env=env)
     assert second.returncode == 0, second.stderr
     lines = [ln for ln in second.stdout.splitlines() if "{" in ln]
-    assert len(lines) == 3
+    assert len(lines) == 5
     for ln in lines:
         hits, misses = ln.split("} {")
         assert ": 1" in hits or ": 2" in hits, ln  # loaded from the cache

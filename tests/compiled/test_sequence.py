@@ -64,38 +64,50 @@ def test_keep_info_selects_keys():
     assert sorted(track.info) == ["nis"]
 
 
-def test_runs_needing_repair_are_recomputed_step_by_step(monkeypatch):
-    """A run the kernel flags (its covariance would need the NumPy repair) is recomputed alone, step by step."""
-    zs, x0 = _data(LINEAR, M=50, T=15)
+class _Flagging:
+    """Wraps a kernel module: its sequence kernels flag some runs (and scribble on their means) after running."""
+
+    def __init__(self, real, flagged, calls):
+        self._real, self._flagged, self._calls = real, flagged, calls
+
+    def __getattr__(self, name):
+        return getattr(self._real, name)
+
+    def _flag(self, kernel):
+        def call(*args):
+            self._calls.append(kernel)
+            kernel(*args)
+            means, ok = args[-8], args[-1]
+            ok[self._flagged] = False
+            means[:, self._flagged] = -1.0  # what the kernel left there must not survive
+        return call
+
+    def __getattribute__(self, name):
+        if name in ("ekf_sequence_parallel", "ekf_sequence_serial", "sequence_parallel", "sequence_serial"):
+            return object.__getattribute__(self, "_flag")(getattr(object.__getattribute__(self, "_real"), name))
+        return object.__getattribute__(self, name)
+
+
+@pytest.mark.parametrize("cls, meas", [(pu.KalmanFilter, LINEAR), (pu.ExtendedKalmanFilter, RANGES)], ids=["generated", "block"])
+def test_runs_needing_repair_are_recomputed_step_by_step(monkeypatch, cls, meas):
+    """A run the kernel flags (its covariance would need the NumPy repair) is recomputed alone, step by step.
+
+    Both sequence kernels are covered: the generated one of a linear measurement and the block one.
+    """
+    zs, x0 = _data(meas, M=50, T=15)
     flagged = [3, 17, 40]
-    real = glue.GK
     calls = []
-
-    class Flagging:
-        def __getattr__(self, name):
-            return getattr(real, name)
-
-        def _flag(self, kernel):
-            def call(*args):
-                calls.append(kernel)
-                kernel(*args)
-                means, ok = args[-8], args[-1]
-                ok[flagged] = False
-                means[:, flagged] = -1.0  # what the kernel left there must not survive
-            return call
-
-        @property
-        def ekf_sequence_parallel(self):
-            return self._flag(real.ekf_sequence_parallel)
-
-        @property
-        def ekf_sequence_serial(self):
-            return self._flag(real.ekf_sequence_serial)
-
-    filt = pu.KalmanFilter(MOTION, LINEAR, backend="numba")
+    filt = cls(MOTION, meas, backend="numba")
     prior = pu.Gaussian(x0, np.eye(4))
     steps = pu.run(filt, zs, prior, sequence=False)
-    monkeypatch.setattr(glue, "GK", Flagging())
+    monkeypatch.setattr(glue, "GK", _Flagging(glue.GK, flagged, calls))
+    real_linear = glue._linear_kernels
+
+    def flagged_linear(*args):
+        module = real_linear(*args)
+        return None if module is None else _Flagging(module, flagged, calls)
+
+    monkeypatch.setattr(glue, "_linear_kernels", flagged_linear)
     whole = pu.run(filt, zs, prior)
     assert len(calls) == 1
     assert whole.info["repaired"].sum() == 0  # flagged, not broken: the step path needed no repair

@@ -6,6 +6,12 @@ consecutive compiled steps pass their arrays without copying.  Runs whose
 covariance does not factor are recomputed with the NumPy step (which
 repairs them) and spliced in; every other run never sees NumPy, so a run's
 result does not depend on its neighbours.
+
+A KF/EKF with a linear measurement (``H x``) runs the unrolled kernels
+generated for its model's structure (:mod:`pursuit._compiled.kf_codegen`),
+for the step path and the whole-sequence path alike, so both give the same
+bits; other measurements run the block kernels of
+:mod:`pursuit._compiled.gauss_kernels`.
 """
 
 from __future__ import annotations
@@ -15,6 +21,8 @@ import numpy as np
 from ..filters.gaussian import GaussianState
 from ..gaussian import Gaussian
 from . import gauss_kernels as GK
+from . import generated
+from .specs import M_LINEAR
 from .particle import measurement_args, use_parallel
 
 __all__ = ["gaussian_step", "gaussian_sequence", "lanes"]
@@ -25,6 +33,13 @@ def lanes(a: np.ndarray, core: int) -> np.ndarray:
     order = tuple(range(1, core + 1)) + (0,)
     t = a.transpose(order)
     return t if t.flags.c_contiguous else np.ascontiguousarray(t)
+
+
+def _linear_kernels(kind: str, hs, F: np.ndarray, Q: np.ndarray):
+    """The generated kernels for a KF/EKF with a linear measurement, else ``None`` (block kernels)."""
+    if kind != "ekf" or hs.kind != M_LINEAR:
+        return None
+    return generated.linear_kf_kernels(F, Q, np.ascontiguousarray(hs.A), np.ascontiguousarray(hs.R))
 
 
 def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, kind: str):
@@ -52,7 +67,10 @@ def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, 
     par = use_parallel(M)
     margs = measurement_args(hs)
     outs = (x_out, P_out, xp, Pp, cross, innov, S, nis, dof, loglik, ok)
-    if kind == "ekf":
+    gen = _linear_kernels(kind, hs, F, Q)
+    if gen is not None:
+        (gen.step_parallel if par else gen.step_serial)(x, P, zl, valid, F, Q, lam, hs.A, hs.R, *outs)
+    elif kind == "ekf":
         (GK.ekf_step_parallel if par else GK.ekf_step_serial)(x, P, zl, valid, F, Q, lam, *margs, *outs)
     else:
         cscale, wm, wc = filt._weights(n)
@@ -130,8 +148,13 @@ def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_co
     nis, loglik = np.empty((K, M)), np.empty((K, M))
     dof = np.empty((K, M), dtype=np.int64)
     ok = np.ones(M, dtype=np.bool_)
-    kernel = GK.ekf_sequence_parallel if use_parallel(M) else GK.ekf_sequence_serial
-    kernel(x, P, zl, valid, F, Q, lam, *measurement_args(hs), keep_cov, means, covs, innov, S, nis, dof, loglik, ok)
+    gen = _linear_kernels("ekf", hs, F, Q)
+    if gen is not None:
+        kernel = gen.sequence_parallel if use_parallel(M) else gen.sequence_serial
+        kernel(x, P, zl, valid, F, Q, lam, hs.A, hs.R, keep_cov, means, covs, innov, S, nis, dof, loglik, ok)
+    else:
+        kernel = GK.ekf_sequence_parallel if use_parallel(M) else GK.ekf_sequence_serial
+        kernel(x, P, zl, valid, F, Q, lam, *measurement_args(hs), keep_cov, means, covs, innov, S, nis, dof, loglik, ok)
     info = {
         "innovation": innov,
         "S": S,

@@ -1,0 +1,444 @@
+"""Source of the unrolled linear Kalman kernels, generated per model structure (no numba import here).
+
+The block kernels of :mod:`pursuit._compiled.gauss_kernels` sweep whole
+``(n, n, B)`` arrays once per matrix product, so a Kalman step streams its
+temporaries through the cache several times and is bound by memory traffic
+(about 300 ns per run-step on a 4-state model).  For a *linear* measurement
+(``z = H x + v``), this module writes the whole predict-and-update step of
+one run as straight-line scalar code: every matrix entry is a local
+variable, every product is written out, and entries that the model's
+structure makes zero (``F``, ``Q``, ``H``, ``R`` have fixed zero patterns,
+a CV model's ``F`` is half zeros) are dropped at generation time.  The loop
+over runs is innermost around that body, so the compiler vectorises it
+across runs (SIMD lanes) with everything in registers; only the state and
+the outputs touch memory.
+
+The arithmetic is that of the block kernels' Joseph-form update with
+missing components masked (``pursuit.filters.gaussian``'s convention):
+``P⁻ = λ F P Fᵀ + Q``, ``S = H P⁻ Hᵀ + R`` on the measured components (an
+unmeasured one gets ``S_aa = 1`` and no cross terms), ``K = P⁻ Hᵀ S⁻¹``
+with the unmeasured columns zeroed, ``P = (I − K H) P⁻ (I − K H)ᵀ + K R Kᵀ``.
+A run whose innovation covariance does not factor is flagged in ``ok`` for
+the caller to recompute with NumPy, as in the block kernels.
+
+Two kernels come from one body, so they give the same bits: ``sequence``
+(all steps of a block of runs, the state kept in block arrays) and
+``step`` (one step, lane-major inputs and outputs, with the prediction
+and cross-covariance the smoother needs).  Each has a serial and a
+``parallel=True`` build.  The source is a pure function of
+``(n, m)`` and the four zero patterns, so it can be cached on disk (see
+:mod:`pursuit._compiled.generated`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["linear_kf_source", "structure_key"]
+
+#: Runs per block of the sequence kernel: the block's state (about 1 KB per
+#: lane for n = 4) stays in the first-level caches between steps.
+SEQUENCE_BLOCK = 128
+#: Runs per parallel chunk of the step kernel.
+STEP_BLOCK = 1024
+
+Value = "str | float"  # a variable name, or the constant 0.0 / 1.0
+
+
+def structure_key(F: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray) -> tuple:
+    """``(n, m, patterns)``: what the generated source depends on (the zero patterns of F, Q, H, R)."""
+    n, m = F.shape[0], H.shape[0]
+    pats = tuple("".join("1" if v != 0.0 else "0" for v in np.asarray(a, dtype=float).ravel()) for a in (F, Q, H, R))
+    return n, m, pats
+
+
+def _mul(*factors):
+    """Product of names and constants with 0 and 1 folded: a name, a tuple of names, or a constant."""
+    if any(isinstance(f, float) and f == 0.0 for f in factors):
+        return 0.0
+    names = tuple(f for f in factors if not isinstance(f, float))
+    if not names:
+        return 1.0
+    return names if len(names) > 1 else names[0]
+
+
+def _product(t) -> str:
+    return " * ".join(t) if isinstance(t, tuple) else (t if isinstance(t, str) else repr(t))
+
+
+def _sum(terms):
+    """Sum of terms (names, products from :func:`_mul`, constants) with the zeros dropped.
+
+    Products after the first are accumulated with explicit ``fma`` calls and
+    nothing is left to the compiler's floating-point contraction: whether it
+    fuses a product depends on how often the product is used, which differs
+    between the step and the sequence kernel, and they must give the same bits.
+    """
+    kept = [t for t in terms if not (isinstance(t, float) and t == 0.0)]
+    if not kept:
+        return 0.0
+    acc = _product(kept[0])
+    for t in kept[1:]:
+        if isinstance(t, tuple):
+            acc = f"fma({_product(t[:-1])}, {t[-1]}, {acc})"
+        else:
+            acc = f"{acc} + {_product(t)}"
+    return acc
+
+
+class _Writer:
+    """Lines of source at one indentation; ``let`` names a value unless it is a constant."""
+
+    def __init__(self, indent: str):
+        self.indent = indent
+        self.lines: list[str] = []
+
+    def line(self, text: str) -> None:
+        self.lines.append(self.indent + text)
+
+    def let(self, name: str, expr):
+        if isinstance(expr, float):
+            return expr
+        self.line(f"{name} = {_product(expr)}")
+        return name
+
+
+def _param(name: str, pattern: str, shape: tuple[int, int], symmetric: bool = False) -> dict:
+    """Names of a model matrix's entries (``0.0`` where its pattern is zero)."""
+    rows, cols = shape
+    out = {}
+    for i in range(rows):
+        for j in range(cols):
+            a, b = (min(i, j), max(i, j)) if symmetric else (i, j)
+            nonzero = pattern[a * cols + b] == "1" or (symmetric and pattern[b * cols + a] == "1")
+            out[i, j] = f"{name}{a}_{b}" if nonzero else 0.0
+    return out
+
+
+def _hoist(w: _Writer, name: str, pattern: str, shape, symmetric=False) -> dict:
+    entries = _param(name, pattern, shape, symmetric)
+    seen = set()
+    for (i, j), v in entries.items():
+        if isinstance(v, str) and v not in seen:
+            seen.add(v)
+            w.line(f"{v} = {name}[{i}, {j}]")
+    return entries
+
+
+def _body(w: _Writer, n: int, m: int, Fe: dict, Qe: dict, He: dict, Re: dict, x: dict, P: dict, z: dict, valid: dict) -> dict:
+    """The predict-and-update step of one run as straight-line code; returns the names of its results.
+
+    ``x[i]``, ``P[i, j]`` (i ≤ j), ``z[a]`` and ``valid[a]`` are source expressions for the run's
+    state and measurement.  Every value is a local scalar; constants 0 and 1 are folded.
+    """
+    xs = {i: w.let(f"x{i}", x[i]) for i in range(n)}
+    Ps = {}
+    for i in range(n):
+        for j in range(i, n):
+            Ps[i, j] = Ps[j, i] = w.let(f"p{i}_{j}", P[i, j])
+    # predict: x⁻ = F x, cross = P Fᵀ, P⁻ = λ F cross + Q (upper triangle)
+    xp = {i: w.let(f"xp{i}", _sum([_mul(Fe[i, j], xs[j]) for j in range(n)])) for i in range(n)}
+    cross = {(i, j): w.let(f"c{i}_{j}", _sum([_mul(Ps[i, p], Fe[j, p]) for p in range(n)])) for i in range(n) for j in range(n)}
+    Pp = {}
+    for i in range(n):
+        for j in range(i, n):
+            fpf = w.let(f"f{i}_{j}", _sum([_mul(Fe[i, p], cross[p, j]) for p in range(n)]))
+            Pp[i, j] = Pp[j, i] = w.let(f"pp{i}_{j}", _sum([_mul("lam", fpf), Qe[i, j]]))
+    # innovation, masked: ν_a = z_a − (H x⁻)_a where measured, else 0 (NaN in the reported innovation)
+    v, e, nu = {}, {}, {}
+    for a in range(m):
+        v[a] = w.let(f"v{a}", f"1.0 if {valid[a]} else 0.0")
+        zp = w.let(f"zp{a}", _sum([_mul(He[a, j], xp[j]) for j in range(n)]))
+        d = w.let(f"d{a}", f"{z[a]} - {zp}" if isinstance(zp, str) else f"{z[a]} - {zp!r}")
+        e[a] = w.let(f"e{a}", f"{d} if v{a} > 0.0 else np.nan")
+        nu[a] = w.let(f"nu{a}", f"{d} if v{a} > 0.0 else 0.0")
+    ph = {(i, a): w.let(f"ph{i}_{a}", _sum([_mul(Pp[i, j], He[a, j]) for j in range(n)])) for i in range(n) for a in range(m)}
+    # S = H P⁻ Hᵀ + R on the measured pairs; an unmeasured component gets S_aa = R_aa's slot = 1
+    Reff, S = {}, {}
+    for a in range(m):
+        for b in range(a, m):
+            pzz = w.let(f"pz{a}_{b}", _sum([_mul(He[a, i], ph[i, b]) for i in range(n)]))
+            both = f"v{a} > 0.0" if a == b else f"v{a} * v{b} > 0.0"
+            if a == b:
+                r = Re[a, a] if isinstance(Re[a, a], str) else repr(Re[a, a])
+                re = w.let(f"re{a}_{b}", f"{r} if {both} else 1.0")
+            else:
+                re = Re[a, b] if isinstance(Re[a, b], float) else w.let(f"re{a}_{b}", f"{Re[a, b]} if {both} else 0.0")
+            Reff[a, b] = Reff[b, a] = re
+            masked = 0.0 if isinstance(pzz, float) else w.let(f"pm{a}_{b}", f"{pzz} if {both} else 0.0")
+            S[a, b] = S[b, a] = w.let(f"s{a}_{b}", _sum([masked, re]))
+    Si = _spd_inverse(w, m, S)
+    # gain (unmeasured columns zeroed) and state update
+    Kg = {(i, b): w.let(f"k{i}_{b}", _sum([_mul(ph[i, a], v[a], Si[a, b]) for a in range(m)])) for i in range(n) for b in range(m)}
+    xo = {i: w.let(f"xo{i}", _sum([xp[i]] + [_mul(Kg[i, b], nu[b]) for b in range(m)])) for i in range(n)}
+    # Joseph form: A = I − K (H masked), P = A P⁻ Aᵀ + K R Kᵀ
+    hv = {(a, j): w.let(f"hv{a}_{j}", _mul(He[a, j], v[a])) for a in range(m) for j in range(n)}
+    A = {}
+    for i in range(n):
+        for j in range(n):
+            kh = w.let(f"kh{i}_{j}", _sum([_mul(Kg[i, a], hv[a, j]) for a in range(m)]))
+            eye = 1.0 if i == j else 0.0
+            if isinstance(kh, float):
+                A[i, j] = eye - kh
+            else:
+                A[i, j] = w.let(f"a{i}_{j}", f"1.0 - ({kh})" if eye else f"-({kh})")
+    T = {(i, j): w.let(f"t{i}_{j}", _sum([_mul(A[i, p], Pp[p, j]) for p in range(n)])) for i in range(n) for j in range(n)}
+    KR = {(i, b): w.let(f"kr{i}_{b}", _sum([_mul(Kg[i, a], Reff[a, b]) for a in range(m)])) for i in range(n) for b in range(m)}
+    Po = {}
+    for i in range(n):
+        for j in range(i, n):
+            Po[i, j] = Po[j, i] = w.let(f"po{i}_{j}", _sum([_mul(T[i, p], A[j, p]) for p in range(n)]
+                                                          + [_mul(KR[i, b], Kg[j, b]) for b in range(m)]))
+    q = w.let("q", _sum([_mul(nu[a], Si[a, b], nu[b]) for a in range(m) for b in range(m)]))
+    dd = w.let("dd", _sum([v[a] for a in range(m)]))
+    return {"xo": xo, "Po": Po, "xp": xp, "Pp": Pp, "cross": cross, "e": e, "S": S, "q": q, "dd": dd}
+
+
+def _spd_inverse(w: _Writer, m: int, S: dict) -> dict:
+    """S⁻¹ (names) and, as locals ``det`` and ``good``, its determinant and whether S is positive definite."""
+    if m == 1:
+        w.line(f"det = {S[0, 0]}")
+        w.line("good = det > 0.0 and det < np.inf")
+        return {(0, 0): w.let("si0_0", f"1.0 / {S[0, 0]}")}
+    if m == 2:  # closed form, as pursuit._linalg.inv_spd
+        a, b, d = S[0, 0], S[0, 1], S[1, 1]
+        bb = b if isinstance(b, str) else repr(b)
+        w.line(f"det = {a} * {d} - {bb} * {bb}")
+        w.line(f"good = {a} > 0.0 and det > 0.0 and det < np.inf")
+        w.line("inv = 1.0 / det")
+        si = {(0, 0): w.let("si0_0", f"{d} * inv"), (1, 1): w.let("si1_1", f"{a} * inv")}
+        si[0, 1] = si[1, 0] = w.let("si0_1", f"-({bb}) * inv")
+        return si
+    # unrolled Cholesky S = L Lᵀ, then S⁻¹ = L⁻ᵀ L⁻¹
+    L = {}
+    goods, pivots = [], []
+    for j in range(m):
+        dj = w.let(f"cd{j}", _sum([S[j, j]] + [_mul(f"-{L[j, p]}", L[j, p]) if isinstance(L[j, p], str) else 0.0 for p in range(j)]))
+        goods.append(f"({dj} > 0.0 and {dj} < np.inf)")
+        pivots.append(dj)
+        L[j, j] = w.let(f"l{j}_{j}", f"math.sqrt({dj}) if {goods[-1]} else 1.0")
+        for i in range(j + 1, m):
+            num = w.let(f"ln{i}_{j}", _sum([S[i, j]] + [_mul(f"-{L[i, p]}", L[j, p]) if isinstance(L[i, p], str) else 0.0 for p in range(j)]))
+            L[i, j] = w.let(f"l{i}_{j}", f"{num} / {L[j, j]}" if isinstance(num, str) else 0.0)
+    w.line("det = " + " * ".join(pivots))
+    w.line("good = " + " and ".join(goods) + " and det < np.inf")
+    Li = {}
+    for j in range(m):
+        Li[j, j] = w.let(f"li{j}_{j}", f"1.0 / {L[j, j]}")
+        for i in range(j + 1, m):
+            s = _sum([_mul(L[i, p], Li[p, j]) for p in range(j, i)])
+            Li[i, j] = w.let(f"li{i}_{j}", f"-({s}) / {L[i, i]}" if isinstance(s, str) else 0.0)
+    si = {}
+    for a in range(m):
+        for b in range(a, m):
+            si[a, b] = si[b, a] = w.let(f"si{a}_{b}", _sum([_mul(Li[p, a], Li[p, b]) for p in range(b, m)]))
+    return si
+
+
+def _lit(v) -> str:
+    return v if isinstance(v, str) else repr(v)
+
+
+def _header(n: int, m: int, pats: tuple, name: str, args: str) -> tuple[_Writer, dict, dict, dict, dict]:
+    w = _Writer("")
+    w.line(f"def {name}({args}):")
+    w.indent = "    "
+    Fe = _hoist(w, "F", pats[0], (n, n))
+    Qe = _hoist(w, "Q", pats[1], (n, n), symmetric=True)
+    He = _hoist(w, "H", pats[2], (m, n))
+    Re = _hoist(w, "R", pats[3], (m, m), symmetric=True)
+    return w, Fe, Qe, He, Re
+
+
+class _Rows:
+    """Row offsets in a flat workspace of ``block`` lanes per row (one array, constant offsets).
+
+    Keeping every per-lane value of a block in one 1-D array with offsets
+    known at compile time lets the compiler prove that the rows never
+    overlap, so the loop over lanes vectorises with a couple of runtime
+    alias checks instead of one per pair of arrays (LLVM gives up beyond a
+    handful).
+    """
+
+    def __init__(self, block: int):
+        self.block = block
+        self.count = 0
+
+    def take(self, k: int) -> int:
+        first = self.count
+        self.count += k
+        return first
+
+    def at(self, row: int, lane: str = "c") -> str:
+        return f"ws[{row * self.block} + {lane}]"
+
+
+def _sequence_source(n: int, m: int, pats: tuple) -> list[str]:
+    w, Fe, Qe, He, Re = _header(n, m, pats, "_sequence",
+                                "xinit, Pinit, zs, valid, F, Q, lam, H, R, keep_cov, means, covs, innov, S_out, nis, dof, loglik, ok")
+    tri = {(i, j): t for t, (i, j) in enumerate((i, j) for i in range(n) for j in range(i, n))}
+    stri = [(a, b) for a in range(m) for b in range(a, m)]
+    rows = _Rows(SEQUENCE_BLOCK)
+    rx, rP, re_, rS = rows.take(n), rows.take(len(tri)), rows.take(m), rows.take(len(stri))
+    rq, rdd, rdet, rok = rows.take(1), rows.take(1), rows.take(1), rows.take(1)
+    at = rows.at
+    w.line("M = xinit.shape[1]")
+    w.line("K = zs.shape[0]")
+    w.line(f"nb = (M + {SEQUENCE_BLOCK} - 1) // {SEQUENCE_BLOCK}")
+    w.line("for bb in prange(nb):")
+    w.indent = "        "
+    w.line(f"r0 = np.int64(bb) * {SEQUENCE_BLOCK}")
+    w.line(f"B = min(r0 + {SEQUENCE_BLOCK}, M) - r0")
+    w.line(f"ws = np.empty({rows.count * SEQUENCE_BLOCK})")
+    w.line("for c in range(B):")
+    for i in range(n):
+        w.line(f"    {at(rx + i)} = xinit[{i}, r0 + c]")
+    for (i, j), t in tri.items():
+        w.line(f"    {at(rP + t)} = 0.5 * (Pinit[{i}, {j}, r0 + c] + Pinit[{j}, {i}, r0 + c])")
+    w.line(f"    {at(rok)} = 1.0")
+    w.line("for k in range(K):")
+    w.line("    zk = zs[k]")
+    w.line("    vk = valid[k]")
+    w.line("    for c in range(B):")
+    w.indent = "                "
+    res = _body(w, n, m, Fe, Qe, He, Re,
+                {i: at(rx + i) for i in range(n)},
+                {(i, j): at(rP + t) for (i, j), t in tri.items()},
+                {a: f"zk[{a}, r0 + c]" for a in range(m)},
+                {a: f"vk[{a}, r0 + c]" for a in range(m)})
+    for i in range(n):
+        w.line(f"{at(rx + i)} = {_lit(res['xo'][i])}")
+    for (i, j), t in tri.items():
+        w.line(f"{at(rP + t)} = {_lit(res['Po'][i, j])}")
+    for a in range(m):
+        w.line(f"{at(re_ + a)} = {_lit(res['e'][a])}")
+    for t, (a, b) in enumerate(stri):
+        w.line(f"{at(rS + t)} = {_lit(res['S'][a, b])}")
+    w.line(f"{at(rq)} = {_lit(res['q'])} if {_lit(res['dd'])} > 0 else np.nan")
+    w.line(f"{at(rdd)} = {_lit(res['dd'])}")
+    w.line(f"{at(rdet)} = det if good else 1.0")
+    w.line(f"{at(rok)} = {at(rok)} if good else 0.0")
+    # the results of step k into the track's layout (runs outer, components inner)
+    w.indent = "            "
+    w.line("for c in range(B):")
+    w.line("    r = r0 + c")
+    for i in range(n):
+        w.line(f"    means[k, r, {i}] = {at(rx + i)}")
+    for a in range(m):
+        w.line(f"    innov[k, r, {a}] = {at(re_ + a)}")
+    for t, (a, b) in enumerate(stri):
+        w.line(f"    S_out[k, r, {a}, {b}] = {at(rS + t)}")
+        if a != b:
+            w.line(f"    S_out[k, r, {b}, {a}] = {at(rS + t)}")
+    _finish_lines(w, "    ", at(rq), at(rdd), at(rdet), "nis[k, r]", "dof[k, r]", "loglik[k, r]")
+    w.line("if keep_cov:")
+    w.line("    for c in range(B):")
+    for (i, j), t in tri.items():
+        w.line(f"        covs[k, r0 + c, {i}, {j}] = {at(rP + t)}")
+        if i != j:
+            w.line(f"        covs[k, r0 + c, {j}, {i}] = {at(rP + t)}")
+    w.indent = "        "
+    w.line("for c in range(B):")
+    w.line(f"    ok[r0 + c] = {at(rok)} > 0.0")
+    return w.lines
+
+
+def _finish_lines(w: _Writer, pad: str, q: str, dd: str, det: str, nis: str, dof: str, loglik: str) -> None:
+    """NIS, degrees of freedom and log-likelihood from the stored q, count and determinant (log outside the SIMD loop)."""
+    w.line(f"{pad}dd = {dd}")
+    w.line(f"{pad}{nis} = {q}")
+    w.line(f"{pad}{dof} = np.int64(dd)")
+    w.line(f"{pad}{loglik} = -0.5 * ({q} + math.log({det}) + dd * LOG_2PI) if dd > 0 else 0.0")
+
+
+def _step_source(n: int, m: int, pats: tuple) -> list[str]:
+    w, Fe, Qe, He, Re = _header(n, m, pats, "_step",
+                                "x, P, z, valid, F, Q, lam, H, R, x_out, P_out, xp_out, Pp_out, cross_out, "
+                                "innov, S_out, nis, dof, loglik, ok")
+    rows = _Rows(STEP_BLOCK)
+    outs = []  # (output array, its index without the run, workspace row)
+    res_keys = []
+    for name, key, idx in [("x_out", "xo", [(i,) for i in range(n)]), ("xp_out", "xp", [(i,) for i in range(n)]),
+                           ("P_out", "Po", [(i, j) for i in range(n) for j in range(n)]),
+                           ("Pp_out", "Pp", [(i, j) for i in range(n) for j in range(n)]),
+                           ("cross_out", "cross", [(i, j) for i in range(n) for j in range(n)]),
+                           ("innov", "e", [(a,) for a in range(m)]), ("S_out", "S", [(a, b) for a in range(m) for b in range(m)])]:
+        for ix in idx:
+            outs.append((name, ix, rows.take(1)))
+            res_keys.append((key, ix))
+    rq, rdd, rdet, rok = rows.take(1), rows.take(1), rows.take(1), rows.take(1)
+    at = rows.at
+    w.line("M = x.shape[1]")
+    w.line(f"nb = (M + {STEP_BLOCK} - 1) // {STEP_BLOCK}")
+    w.line("for bb in prange(nb):")
+    w.indent = "        "
+    w.line(f"r0 = np.int64(bb) * {STEP_BLOCK}")
+    w.line(f"B = min(r0 + {STEP_BLOCK}, M) - r0")
+    w.line(f"ws = np.empty({rows.count * STEP_BLOCK})")
+    w.line("for c in range(B):")
+    w.indent = "            "
+    res = _body(w, n, m, Fe, Qe, He, Re,
+                {i: f"x[{i}, r0 + c]" for i in range(n)},
+                {(i, j): f"0.5 * (P[{i}, {j}, r0 + c] + P[{j}, {i}, r0 + c])" for i in range(n) for j in range(i, n)},
+                {a: f"z[{a}, r0 + c]" for a in range(m)},
+                {a: f"valid[{a}, r0 + c]" for a in range(m)})
+    for (name, ix, row), (key, rix) in zip(outs, res_keys):
+        value = res[key][rix[0]] if len(rix) == 1 else res[key][rix]
+        w.line(f"{at(row)} = {_lit(value)}")
+    w.line(f"{at(rq)} = {_lit(res['q'])} if {_lit(res['dd'])} > 0 else np.nan")
+    w.line(f"{at(rdd)} = {_lit(res['dd'])}")
+    w.line(f"{at(rdet)} = det if good else 1.0")
+    w.line(f"{at(rok)} = 1.0 if good else 0.0")
+    # lane-major outputs: one plain copy loop per output row
+    w.indent = "        "
+    for name, ix, row in outs:
+        w.line("for c in range(B):")
+        w.line(f"    {name}[{', '.join(str(i) for i in ix)}, r0 + c] = {at(row)}")
+    w.line("for c in range(B):")
+    w.line("    r = r0 + c")
+    _finish_lines(w, "    ", at(rq), at(rdd), at(rdet), "nis[r]", "dof[r]", "loglik[r]")
+    w.line(f"    ok[r] = {at(rok)} > 0.0")
+    return w.lines
+
+
+def linear_kf_source(n: int, m: int, pats: tuple) -> str:
+    """Module source with ``sequence_serial``, ``sequence_parallel``, ``step_serial`` and ``step_parallel``.
+
+    Parameters
+    ----------
+    n, m : int
+        State and measurement dimensions.
+    pats : tuple of str
+        Zero patterns of ``F (n, n)``, ``Q (n, n)``, ``H (m, n)`` and ``R (m, m)``
+        as strings of ``"0"``/``"1"`` in row-major order (:func:`structure_key`).
+
+    Notes
+    -----
+    The kernels take the model matrices as arguments (only their zero
+    patterns are baked in), so one compiled module serves every model of
+    that structure; a matrix with a non-zero where its pattern says zero
+    would be computed wrongly, which is why the caller keys on the pattern
+    of the matrices it passes.
+    """
+    if n < 1 or m < 1:
+        raise ValueError(f"linear_kf_source: n and m must be >= 1, got n={n}, m={m}")
+    head = [
+        f'"""Generated by pursuit._compiled.kf_codegen for n={n}, m={m}, patterns {pats}: do not edit."""',
+        "import math",
+        "import numpy as np",
+        "from numba import njit, prange",
+        "from pursuit._compiled.common import fma",
+        f"LOG_2PI = {math.log(2.0 * math.pi)!r}",
+        "",
+    ]
+    opts = "cache=True, error_model='numpy'"
+    tail = [
+        "",
+        f"sequence_serial = njit({opts})(_sequence)",
+        f"sequence_parallel = njit(parallel=True, {opts})(_sequence)",
+        f"step_serial = njit({opts})(_step)",
+        f"step_parallel = njit(parallel=True, {opts})(_step)",
+    ]
+    return "\n".join(head + _sequence_source(n, m, pats) + [""] + _step_source(n, m, pats) + tail) + "\n"
