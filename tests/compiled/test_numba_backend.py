@@ -263,7 +263,7 @@ ekf = pu.ExtendedKalmanFilter(mot, RangeSensors([[0.0, 0.0], [50.0, 0.0]], 1.0, 
 pu.run(ekf, np.full((3, 2, 2), 10.0), prior)
 pu.run(ekf, np.full((3, 2, 2), 10.0), prior, sequence=False)
 (gen,) = generated._modules.values()
-for d in (K.pf_step_parallel, GK.ekf_sequence_parallel, GK.ekf_step_parallel, gen.sequence_parallel, gen.step_parallel):
+for d in (K.pf_step_parallel, GK.ekf_sequence_parallel, GK.ekf_step_parallel, gen.sequence, gen.step):
     print(d.__name__ if hasattr(d, "__name__") else d, dict(d.stats.cache_hits), dict(d.stats.cache_misses))
 """
     env = dict(os.environ, PURSUIT_KERNEL_DIR=str(tmp_path / "kernels"))

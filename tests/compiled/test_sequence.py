@@ -73,18 +73,21 @@ class _Flagging:
     def __getattr__(self, name):
         return getattr(self._real, name)
 
-    def _flag(self, kernel):
+    def _flag(self, kernel, generated_kernel):
         def call(*args):
             self._calls.append(kernel)
             kernel(*args)
-            means, ok = args[-8], args[-1]
+            # the generated kernel takes a range of blocks after the outputs
+            means, ok = (args[-10], args[-3]) if generated_kernel else (args[-8], args[-1])
             ok[self._flagged] = False
-            means[:, self._flagged] = -1.0  # what the kernel left there must not survive
+            # what the kernel left there must not survive (the generated kernel's means are flattened per step)
+            means.reshape(means.shape[0], ok.shape[0], -1)[:, self._flagged] = -1.0
         return call
 
     def __getattribute__(self, name):
-        if name in ("ekf_sequence_parallel", "ekf_sequence_serial", "sequence_parallel", "sequence_serial"):
-            return object.__getattribute__(self, "_flag")(getattr(object.__getattribute__(self, "_real"), name))
+        if name in ("ekf_sequence_parallel", "ekf_sequence_serial", "sequence"):
+            flag = object.__getattribute__(self, "_flag")
+            return flag(getattr(object.__getattribute__(self, "_real"), name), name == "sequence")
         return object.__getattribute__(self, name)
 
 

@@ -7,6 +7,8 @@ built-in models of :mod:`pursuit._compiled.specs` for one state vector.
 from __future__ import annotations
 
 import math
+import types as pytypes
+from typing import Callable
 
 import numpy as np
 from llvmlite import ir
@@ -25,6 +27,32 @@ LOG_2PI = math.log(2.0 * math.pi)
 TWO_PI = 2.0 * math.pi
 # exp() of a log-weight below this is a denormal or zero (and slow): use 0
 EXP_FLOOR = -708.0
+
+
+def serial_and_parallel(func: Callable, **options) -> tuple[Callable, Callable]:
+    """``(serial, parallel)`` ``njit`` builds of ``func`` that numba caches apart.
+
+    numba's on-disk cache files a build under the function's qualified
+    name and first line, and tells entries apart by signature and bytecode,
+    not by ``parallel=``: two builds of one function share one cache entry,
+    and once it is warm the second loads the first one's machine code (a
+    "parallel" kernel that runs on one thread, or a serial one that runs
+    ``prange`` from a worker thread).  The parallel build is therefore made
+    from a copy of ``func`` under its own name.
+
+    Parameters
+    ----------
+    func : callable
+        The Python function (not yet jitted).
+    **options
+        ``njit`` options for both builds (``cache``, ``error_model``, ...).
+    """
+    name = func.__name__ + "__parallel"
+    twin = pytypes.FunctionType(func.__code__.replace(co_name=name), func.__globals__, name, func.__defaults__, func.__closure__)
+    twin.__qualname__ = func.__qualname__ + "__parallel"
+    twin.__module__ = func.__module__
+    twin.__doc__ = func.__doc__
+    return njit(**options)(func), njit(parallel=True, **options)(twin)
 
 
 # --------------------------------------------------------------------------
@@ -100,6 +128,52 @@ def exp_weight(x):
     k = _bits(t) - _ROUND_BITS
     v = p * _from_bits((k + np.int64(1023)) << np.int64(52))
     return v if x > EXP_FLOOR else 0.0
+
+
+# log, as exp above: branch-free so that loops over lanes vectorise (the Kalman kernels' log det S)
+_TINY = 2.2250738585072014e-308  # smallest normal float64
+_TWO54 = 18014398509481984.0
+_SQRT2 = 1.4142135623730951
+_MANT = np.int64(0x000FFFFFFFFFFFFF)
+_ONE_BITS = np.int64(0x3FF0000000000000)
+# minimax coefficients of (log(1+f) − f + f²/2) / s expanded in s² = (f / (2 + f))² (Sun's fdlibm e_log.c)
+_LG1 = 6.666666666666735130e-01
+_LG2 = 3.999999999940941908e-01
+_LG3 = 2.857142874366239149e-01
+_LG4 = 2.222219843214978396e-01
+_LG5 = 1.818357216161805012e-01
+_LG6 = 1.531383769920937332e-01
+_LG7 = 1.479819860511658591e-01
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def log_positive(x):
+    """log(x) for a positive finite x (subnormals included), within 1 ulp of libm's log (tested).
+
+    x = 2^k m with m in (√2/2, √2]; with f = m − 1 and s = f / (2 + f),
+    log m = f − f²/2 + s (f²/2 + R(s²)), R a degree-7 polynomial in s², and
+    k ln 2 is added in two parts (Cody and Waite).  No branches and no call,
+    so a loop over lanes vectorises; zero, negative, infinite or NaN input
+    gives an unspecified finite value, so callers pass only positive finite x.
+    """
+    sub = x < _TINY
+    y = x * _TWO54 if sub else x
+    hx = _bits(y)
+    k = (hx >> np.int64(52)) - np.int64(1023) - (np.int64(54) if sub else np.int64(0))
+    m = _from_bits((hx & _MANT) | _ONE_BITS)
+    big = m > _SQRT2
+    m = m * 0.5 if big else m
+    k = k + (np.int64(1) if big else np.int64(0))
+    dk = _from_bits(k + _ROUND_BITS) - _ROUND  # exact for |k| < 2^51, and vectorises (no int64 → float conversion in AVX2)
+    f = m - 1.0
+    s = f / (2.0 + f)
+    z = s * s
+    w = z * z
+    t1 = w * fma(w, fma(w, _LG6, _LG4), _LG2)
+    t2 = z * fma(w, fma(w, fma(w, _LG7, _LG5), _LG3), _LG1)
+    r = t2 + t1
+    hfsq = 0.5 * f * f
+    return dk * _LN2_HI - ((hfsq - (s * (hfsq + r) + dk * _LN2_LO)) - f)
 
 
 @njit(cache=True, inline="always", error_model="numpy")

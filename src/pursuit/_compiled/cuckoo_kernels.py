@@ -24,7 +24,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .common import LOG_2PI, copy_by_counts, h_one, n_uniforms, resample_counts, wrap
+from .common import LOG_2PI, copy_by_counts, h_one, n_uniforms, resample_counts, serial_and_parallel, wrap
 from .pf_kernels import exp_shifted_run, measure_run, moments_run, predictive_run
 from .streams import fill_normal, fill_random
 
@@ -298,5 +298,4 @@ def _cuckoo_step(Xprop, logw, state_uniform, sequential, normals, uniforms, z, v
             Xout[r] = Xp
 
 
-cuckoo_step_parallel = njit(cache=True, parallel=True, error_model="numpy")(_cuckoo_step)
-cuckoo_step_serial = njit(cache=True, error_model="numpy")(_cuckoo_step)
+cuckoo_step_serial, cuckoo_step_parallel = serial_and_parallel(_cuckoo_step, cache=True, error_model="numpy")

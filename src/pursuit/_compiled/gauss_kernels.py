@@ -21,7 +21,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .common import LOG_2PI, M_LINEAR, M_RANGE, M_UNGM, wrap
+from .common import LOG_2PI, M_LINEAR, M_RANGE, M_UNGM, serial_and_parallel, wrap
 
 BLOCK = 512
 _NJ = dict(cache=True, error_model="numpy")
@@ -645,9 +645,6 @@ def _sigma_step(x, P, z, valid, F, Q, lam, hk, A, idx, scale, R, angle, cscale, 
             ok[r0 + c] = okb[c]
 
 
-ekf_step_parallel = njit(parallel=True, **_NJ)(_ekf_step)
-ekf_step_serial = njit(**_NJ)(_ekf_step)
-ekf_sequence_parallel = njit(parallel=True, **_NJ)(_ekf_sequence)
-ekf_sequence_serial = njit(**_NJ)(_ekf_sequence)
-sigma_step_parallel = njit(parallel=True, **_NJ)(_sigma_step)
-sigma_step_serial = njit(**_NJ)(_sigma_step)
+ekf_step_serial, ekf_step_parallel = serial_and_parallel(_ekf_step, **_NJ)
+ekf_sequence_serial, ekf_sequence_parallel = serial_and_parallel(_ekf_sequence, **_NJ)
+sigma_step_serial, sigma_step_parallel = serial_and_parallel(_sigma_step, **_NJ)

@@ -21,7 +21,7 @@ import numpy as np
 from ..filters.gaussian import GaussianState
 from ..gaussian import Gaussian
 from . import gauss_kernels as GK
-from . import generated
+from . import generated, kf_codegen
 from .specs import M_LINEAR
 from .particle import measurement_args, use_parallel
 
@@ -68,8 +68,19 @@ def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, 
     margs = measurement_args(hs)
     outs = (x_out, P_out, xp, Pp, cross, innov, S, nis, dof, loglik, ok)
     gen = _linear_kernels(kind, hs, F, Q)
-    if gen is not None:
-        (gen.step_parallel if par else gen.step_serial)(x, P, zl, valid, F, Q, lam, hs.A, hs.R, *outs)
+    if gen is not None:  # one lane-major output array; the results are views of its rows
+        rows = kf_codegen.step_rows(n, m)
+        out = np.empty((sum(c for _, c in rows.values()), M))
+        generated.run_blocks(gen.step, (x, P, zl, valid, F, Q, lam, hs.A, hs.R, out), M, gen.STEP_BLOCK, par)
+
+        def part(name, shape):
+            first, count = rows[name]
+            return out[first:first + count].reshape(*shape, M)
+
+        x_out, xp, P_out, Pp, cross = part("x", (n,)), part("xp", (n,)), part("P", (n, n)), part("Pp", (n, n)), part("cross", (n, n))
+        innov, S = part("innov", (m,)), part("S", (m, m))
+        nis, loglik = out[rows["nis"][0]], out[rows["loglik"][0]]
+        dof, ok = out[rows["dof"][0]].astype(np.int64), out[rows["ok"][0]] > 0.0
     elif kind == "ekf":
         (GK.ekf_step_parallel if par else GK.ekf_step_serial)(x, P, zl, valid, F, Q, lam, *margs, *outs)
     else:
@@ -139,8 +150,6 @@ def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_co
     m = hs.dim
     x = lanes(state.mean, 1)
     P = lanes(np.broadcast_to(state.cov, (M, n, n)), 2)
-    zl = np.ascontiguousarray(np.moveaxis(zs, 2, 1))  # (K, m, M)
-    valid = ~np.isnan(zl)
     lam = float(filt.fading.lam)
     means = np.empty((K, M, n))
     covs = np.empty((K, M, n, n) if keep_cov else (1, 1, 1, 1))
@@ -149,10 +158,14 @@ def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_co
     dof = np.empty((K, M), dtype=np.int64)
     ok = np.ones(M, dtype=np.bool_)
     gen = _linear_kernels("ekf", hs, F, Q)
-    if gen is not None:
-        kernel = gen.sequence_parallel if use_parallel(M) else gen.sequence_serial
-        kernel(x, P, zl, valid, F, Q, lam, hs.A, hs.R, keep_cov, means, covs, innov, S, nis, dof, loglik, ok)
+    if gen is not None:  # reads the measurements and writes the outputs in the track's layout, flattened per step
+        args = (x, P, np.ascontiguousarray(zs, dtype=float).reshape(K, M * m), F, Q, lam, hs.A, hs.R, keep_cov,
+                means.reshape(K, M * n), covs.reshape(covs.shape[0], -1), innov.reshape(K, M * m), S.reshape(K, M * m * m),
+                nis, dof, loglik, ok)
+        generated.run_blocks(gen.sequence, args, M, gen.SEQUENCE_BLOCK, use_parallel(M))
     else:
+        zl = np.ascontiguousarray(np.moveaxis(zs, 2, 1))  # (K, m, M)
+        valid = ~np.isnan(zl)
         kernel = GK.ekf_sequence_parallel if use_parallel(M) else GK.ekf_sequence_serial
         kernel(x, P, zl, valid, F, Q, lam, *measurement_args(hs), keep_cov, means, covs, innov, S, nis, dof, loglik, ok)
     info = {

@@ -20,6 +20,7 @@ import os
 import sys
 import tempfile
 import threading
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from types import ModuleType
 
@@ -27,11 +28,12 @@ import numpy as np
 
 from . import kf_codegen
 
-__all__ = ["kernel_dir", "load_module", "linear_kf_kernels"]
+__all__ = ["kernel_dir", "load_module", "linear_kf_kernels", "run_blocks"]
 
 ENV_VAR = "PURSUIT_KERNEL_DIR"
 _modules: dict[tuple, ModuleType] = {}
 _lock = threading.Lock()
+_pool: ThreadPoolExecutor | None = None
 
 
 def _writable(path: Path) -> bool:
@@ -93,3 +95,30 @@ def linear_kf_kernels(F: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray
                 module = load_module(f"linear_kf_n{n}_m{m}", kf_codegen.linear_kf_source(n, m, pats))
                 _modules[key] = module
     return module
+
+
+def run_blocks(kernel, args: tuple, runs: int, block: int, parallel: bool) -> None:
+    """``kernel(*args, b0, b1)`` over the blocks of ``block`` runs, split across numba's thread count.
+
+    The generated kernels are serial and release the GIL (``nogil=True``);
+    threads of one pool run disjoint ranges of blocks.  (A ``prange`` build
+    would not vectorise its body, and serial and parallel builds of one
+    function would share numba's cache entry.)  Each run's result is the
+    same whichever thread computes it.
+    """
+    global _pool
+    import numba
+
+    nblocks = -(-runs // block)
+    threads = min(numba.get_num_threads(), nblocks) if parallel else 1
+    if threads <= 1:
+        kernel(*args, 0, nblocks)
+        return
+    with _lock:
+        if _pool is None or _pool._max_workers < threads:
+            _pool = ThreadPoolExecutor(max_workers=max(threads, numba.config.NUMBA_NUM_THREADS), thread_name_prefix="pursuit-kernel")
+        pool = _pool
+    bounds = np.linspace(0, nblocks, threads + 1).round().astype(np.int64)
+    futures = [pool.submit(kernel, *args, int(bounds[i]), int(bounds[i + 1])) for i in range(threads)]
+    for f in futures:
+        f.result()

@@ -42,9 +42,10 @@ __all__ = ["linear_kf_source", "structure_key"]
 #: lane for n = 4) stays in the first-level caches between steps.
 SEQUENCE_BLOCK = 128
 #: Runs per parallel chunk of the step kernel.
-STEP_BLOCK = 1024
+STEP_BLOCK = 256
 
-Value = "str | float"  # a variable name, or the constant 0.0 / 1.0
+SEQUENCE_ARGS = "xinit, Pinit, zs, F, Q, lam, H, R, keep_cov, means, covs, innov, S_out, nis, dof, loglik, ok, b0, b1"
+STEP_ARGS = "x, P, z, valid, F, Q, lam, H, R, out, b0, b1"
 
 
 def structure_key(F: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray) -> tuple:
@@ -131,7 +132,7 @@ def _body(w: _Writer, n: int, m: int, Fe: dict, Qe: dict, He: dict, Re: dict, x:
     """The predict-and-update step of one run as straight-line code; returns the names of its results.
 
     ``x[i]``, ``P[i, j]`` (i ≤ j), ``z[a]`` and ``valid[a]`` are source expressions for the run's
-    state and measurement.  Every value is a local scalar; constants 0 and 1 are folded.
+    state and measurement (``valid[a] = None``: measured where ``z[a]`` is not NaN).  Every value is a local scalar; constants 0 and 1 are folded.
     """
     xs = {i: w.let(f"x{i}", x[i]) for i in range(n)}
     Ps = {}
@@ -149,9 +150,10 @@ def _body(w: _Writer, n: int, m: int, Fe: dict, Qe: dict, He: dict, Re: dict, x:
     # innovation, masked: ν_a = z_a − (H x⁻)_a where measured, else 0 (NaN in the reported innovation)
     v, e, nu = {}, {}, {}
     for a in range(m):
-        v[a] = w.let(f"v{a}", f"1.0 if {valid[a]} else 0.0")
+        za = w.let(f"zz{a}", z[a])
+        v[a] = w.let(f"v{a}", f"1.0 if {valid[a] if valid[a] is not None else f'{za} == {za}'} else 0.0")
         zp = w.let(f"zp{a}", _sum([_mul(He[a, j], xp[j]) for j in range(n)]))
-        d = w.let(f"d{a}", f"{z[a]} - {zp}" if isinstance(zp, str) else f"{z[a]} - {zp!r}")
+        d = w.let(f"d{a}", f"{za} - {zp}" if isinstance(zp, str) else f"{za} - {zp!r}")
         e[a] = w.let(f"e{a}", f"{d} if v{a} > 0.0 else np.nan")
         nu[a] = w.let(f"nu{a}", f"{d} if v{a} > 0.0 else 0.0")
     ph = {(i, a): w.let(f"ph{i}_{a}", _sum([_mul(Pp[i, j], He[a, j]) for j in range(n)])) for i in range(n) for a in range(m)}
@@ -276,8 +278,7 @@ class _Rows:
 
 
 def _sequence_source(n: int, m: int, pats: tuple) -> list[str]:
-    w, Fe, Qe, He, Re = _header(n, m, pats, "_sequence",
-                                "xinit, Pinit, zs, valid, F, Q, lam, H, R, keep_cov, means, covs, innov, S_out, nis, dof, loglik, ok")
+    w, Fe, Qe, He, Re = _header(n, m, pats, "_sequence", SEQUENCE_ARGS)
     tri = {(i, j): t for t, (i, j) in enumerate((i, j) for i in range(n) for j in range(i, n))}
     stri = [(a, b) for a in range(m) for b in range(a, m)]
     rows = _Rows(SEQUENCE_BLOCK)
@@ -286,28 +287,30 @@ def _sequence_source(n: int, m: int, pats: tuple) -> list[str]:
     at = rows.at
     w.line("M = xinit.shape[1]")
     w.line("K = zs.shape[0]")
-    w.line(f"nb = (M + {SEQUENCE_BLOCK} - 1) // {SEQUENCE_BLOCK}")
-    w.line("for bb in prange(nb):")
+    w.line("for bb in range(b0, b1):")
     w.indent = "        "
     w.line(f"r0 = np.int64(bb) * {SEQUENCE_BLOCK}")
     w.line(f"B = min(r0 + {SEQUENCE_BLOCK}, M) - r0")
     w.line(f"ws = np.empty({rows.count * SEQUENCE_BLOCK})")
+    # views that start at the block's first run: indices from the lane counter alone, whose bounds
+    # the vectoriser can see (r0 is an argument of the outlined block, so r0 + c has none)
+    w.line("xi = xinit[:, r0:r0 + B]")
+    w.line("Pi = Pinit[:, :, r0:r0 + B]")
     w.line("for c in range(B):")
     for i in range(n):
-        w.line(f"    {at(rx + i)} = xinit[{i}, r0 + c]")
+        w.line(f"    {at(rx + i)} = xi[{i}, c]")
     for (i, j), t in tri.items():
-        w.line(f"    {at(rP + t)} = 0.5 * (Pinit[{i}, {j}, r0 + c] + Pinit[{j}, {i}, r0 + c])")
+        w.line(f"    {at(rP + t)} = 0.5 * (Pi[{i}, {j}, c] + Pi[{j}, {i}, c])")
     w.line(f"    {at(rok)} = 1.0")
     w.line("for k in range(K):")
-    w.line("    zk = zs[k]")
-    w.line("    vk = valid[k]")
+    w.line(f"    zk = zs[k, r0 * {m}:(r0 + B) * {m}]")
     w.line("    for c in range(B):")
     w.indent = "                "
     res = _body(w, n, m, Fe, Qe, He, Re,
                 {i: at(rx + i) for i in range(n)},
                 {(i, j): at(rP + t) for (i, j), t in tri.items()},
-                {a: f"zk[{a}, r0 + c]" for a in range(m)},
-                {a: f"vk[{a}, r0 + c]" for a in range(m)})
+                {a: f"zk[c * {m} + {a}]" for a in range(m)},
+                {a: None for a in range(m)})
     for i in range(n):
         w.line(f"{at(rx + i)} = {_lit(res['xo'][i])}")
     for (i, j), t in tri.items():
@@ -318,88 +321,98 @@ def _sequence_source(n: int, m: int, pats: tuple) -> list[str]:
         w.line(f"{at(rS + t)} = {_lit(res['S'][a, b])}")
     w.line(f"{at(rq)} = {_lit(res['q'])} if {_lit(res['dd'])} > 0 else np.nan")
     w.line(f"{at(rdd)} = {_lit(res['dd'])}")
-    w.line(f"{at(rdet)} = det if good else 1.0")
+    _loglik_line(w, at(rdet), res)
     w.line(f"{at(rok)} = {at(rok)} if good else 0.0")
-    # the results of step k into the track's layout (runs outer, components inner)
+    # the results of step k into the track's layout (runs outer, components inner): one loop per
+    # output (strided stores; LLVM's cost model keeps them scalar on AVX2)
+    w.indent = "            "
+
+    def scatter(out: str, width: int, values: list[tuple[int, int]]) -> None:
+        w.line(f"dst = {out}[k, r0 * {width}:(r0 + B) * {width}]")
+        w.line("for c in range(B):")
+        for slot, row in values:
+            w.line(f"    dst[c * {width} + {slot}] = {at(row)}")
+
+    scatter("means", n, [(i, rx + i) for i in range(n)])
+    scatter("innov", m, [(a, re_ + a) for a in range(m)])
+    srows = {ab: rS + t for t, ab in enumerate(stri)}
+    scatter("S_out", m * m, [(a * m + b, srows[min(a, b), max(a, b)]) for a in range(m) for b in range(m)])
+    w.line("if keep_cov:")
+    w.indent = "                "
+    scatter("covs", n * n, [(i * n + j, rP + tri[min(i, j), max(i, j)]) for i in range(n) for j in range(n)])
     w.indent = "            "
     w.line("for c in range(B):")
     w.line("    r = r0 + c")
-    for i in range(n):
-        w.line(f"    means[k, r, {i}] = {at(rx + i)}")
-    for a in range(m):
-        w.line(f"    innov[k, r, {a}] = {at(re_ + a)}")
-    for t, (a, b) in enumerate(stri):
-        w.line(f"    S_out[k, r, {a}, {b}] = {at(rS + t)}")
-        if a != b:
-            w.line(f"    S_out[k, r, {b}, {a}] = {at(rS + t)}")
     _finish_lines(w, "    ", at(rq), at(rdd), at(rdet), "nis[k, r]", "dof[k, r]", "loglik[k, r]")
-    w.line("if keep_cov:")
-    w.line("    for c in range(B):")
-    for (i, j), t in tri.items():
-        w.line(f"        covs[k, r0 + c, {i}, {j}] = {at(rP + t)}")
-        if i != j:
-            w.line(f"        covs[k, r0 + c, {j}, {i}] = {at(rP + t)}")
     w.indent = "        "
     w.line("for c in range(B):")
     w.line(f"    ok[r0 + c] = {at(rok)} > 0.0")
     return w.lines
 
 
-def _finish_lines(w: _Writer, pad: str, q: str, dd: str, det: str, nis: str, dof: str, loglik: str) -> None:
-    """NIS, degrees of freedom and log-likelihood from the stored q, count and determinant (log outside the SIMD loop)."""
-    w.line(f"{pad}dd = {dd}")
+def _loglik_line(w: _Writer, dst: str, res: dict) -> None:
+    """log N(ν; 0, S) over the measured components (0 where none is), in the SIMD loop (log_positive vectorises)."""
+    q, dd = _lit(res["q"]), _lit(res["dd"])
+    w.line(f"{dst} = -0.5 * ({q} + log_positive(det if good else 1.0) + {dd} * LOG_2PI) if {dd} > 0 else 0.0")
+
+
+def _finish_lines(w: _Writer, pad: str, q: str, dd: str, ll: str, nis: str, dof: str, loglik: str) -> None:
+    """NIS, degrees of freedom and log-likelihood from the workspace (a loop of its own: float → int does not vectorise)."""
     w.line(f"{pad}{nis} = {q}")
-    w.line(f"{pad}{dof} = np.int64(dd)")
-    w.line(f"{pad}{loglik} = -0.5 * ({q} + math.log({det}) + dd * LOG_2PI) if dd > 0 else 0.0")
+    w.line(f"{pad}{dof} = np.int64({dd})")
+    w.line(f"{pad}{loglik} = {ll}")
+
+
+def step_rows(n: int, m: int) -> dict[str, tuple[int, int]]:
+    """Row ranges ``(first, count)`` of the step kernel's outputs in its one ``(rows, M)`` output array."""
+    sizes = [("x", n), ("xp", n), ("P", n * n), ("Pp", n * n), ("cross", n * n), ("innov", m), ("S", m * m),
+             ("nis", 1), ("loglik", 1), ("dof", 1), ("ok", 1)]
+    out, first = {}, 0
+    for name, count in sizes:
+        out[name] = (first, count)
+        first += count
+    return out
 
 
 def _step_source(n: int, m: int, pats: tuple) -> list[str]:
-    w, Fe, Qe, He, Re = _header(n, m, pats, "_step",
-                                "x, P, z, valid, F, Q, lam, H, R, x_out, P_out, xp_out, Pp_out, cross_out, "
-                                "innov, S_out, nis, dof, loglik, ok")
-    rows = _Rows(STEP_BLOCK)
-    outs = []  # (output array, its index without the run, workspace row)
-    res_keys = []
-    for name, key, idx in [("x_out", "xo", [(i,) for i in range(n)]), ("xp_out", "xp", [(i,) for i in range(n)]),
-                           ("P_out", "Po", [(i, j) for i in range(n) for j in range(n)]),
-                           ("Pp_out", "Pp", [(i, j) for i in range(n) for j in range(n)]),
-                           ("cross_out", "cross", [(i, j) for i in range(n) for j in range(n)]),
-                           ("innov", "e", [(a,) for a in range(m)]), ("S_out", "S", [(a, b) for a in range(m) for b in range(m)])]:
-        for ix in idx:
-            outs.append((name, ix, rows.take(1)))
-            res_keys.append((key, ix))
-    rq, rdd, rdet, rok = rows.take(1), rows.take(1), rows.take(1), rows.take(1)
-    at = rows.at
+    w, Fe, Qe, He, Re = _header(n, m, pats, "_step", STEP_ARGS)
+    rows = step_rows(n, m)
     w.line("M = x.shape[1]")
-    w.line(f"nb = (M + {STEP_BLOCK} - 1) // {STEP_BLOCK}")
-    w.line("for bb in prange(nb):")
+    w.line("for bb in range(b0, b1):")
     w.indent = "        "
     w.line(f"r0 = np.int64(bb) * {STEP_BLOCK}")
     w.line(f"B = min(r0 + {STEP_BLOCK}, M) - r0")
-    w.line(f"ws = np.empty({rows.count * STEP_BLOCK})")
+    # block views: indices from the lane counter alone; every result goes to one output array,
+    # so the loop needs a few alias checks (LLVM gives up beyond a handful of arrays)
+    w.line("xv = x[:, r0:r0 + B]")
+    w.line("Pv = P[:, :, r0:r0 + B]")
+    w.line("zv = z[:, r0:r0 + B]")
+    w.line("vv = valid[:, r0:r0 + B]")
+    w.line("ov = out[:, r0:r0 + B]")
     w.line("for c in range(B):")
     w.indent = "            "
     res = _body(w, n, m, Fe, Qe, He, Re,
-                {i: f"x[{i}, r0 + c]" for i in range(n)},
-                {(i, j): f"0.5 * (P[{i}, {j}, r0 + c] + P[{j}, {i}, r0 + c])" for i in range(n) for j in range(i, n)},
-                {a: f"z[{a}, r0 + c]" for a in range(m)},
-                {a: f"valid[{a}, r0 + c]" for a in range(m)})
-    for (name, ix, row), (key, rix) in zip(outs, res_keys):
-        value = res[key][rix[0]] if len(rix) == 1 else res[key][rix]
-        w.line(f"{at(row)} = {_lit(value)}")
-    w.line(f"{at(rq)} = {_lit(res['q'])} if {_lit(res['dd'])} > 0 else np.nan")
-    w.line(f"{at(rdd)} = {_lit(res['dd'])}")
-    w.line(f"{at(rdet)} = det if good else 1.0")
-    w.line(f"{at(rok)} = 1.0 if good else 0.0")
-    # lane-major outputs: one plain copy loop per output row
-    w.indent = "        "
-    for name, ix, row in outs:
-        w.line("for c in range(B):")
-        w.line(f"    {name}[{', '.join(str(i) for i in ix)}, r0 + c] = {at(row)}")
-    w.line("for c in range(B):")
-    w.line("    r = r0 + c")
-    _finish_lines(w, "    ", at(rq), at(rdd), at(rdet), "nis[r]", "dof[r]", "loglik[r]")
-    w.line(f"    ok[r] = {at(rok)} > 0.0")
+                {i: f"xv[{i}, c]" for i in range(n)},
+                {(i, j): f"0.5 * (Pv[{i}, {j}, c] + Pv[{j}, {i}, c])" for i in range(n) for j in range(i, n)},
+                {a: f"zv[{a}, c]" for a in range(m)},
+                {a: f"vv[{a}, c]" for a in range(m)})
+
+    def put(name: str, values: list) -> None:
+        first, _ = rows[name]
+        for t, value in enumerate(values):
+            w.line(f"ov[{first + t}, c] = {_lit(value)}")
+
+    put("x", [res["xo"][i] for i in range(n)])
+    put("xp", [res["xp"][i] for i in range(n)])
+    put("P", [res["Po"][i, j] for i in range(n) for j in range(n)])
+    put("Pp", [res["Pp"][i, j] for i in range(n) for j in range(n)])
+    put("cross", [res["cross"][i, j] for i in range(n) for j in range(n)])
+    put("innov", [res["e"][a] for a in range(m)])
+    put("S", [res["S"][a, b] for a in range(m) for b in range(m)])
+    w.line(f"ov[{rows['nis'][0]}, c] = {_lit(res['q'])} if {_lit(res['dd'])} > 0 else np.nan")
+    _loglik_line(w, f"ov[{rows['loglik'][0]}, c]", res)
+    w.line(f"ov[{rows['dof'][0]}, c] = {_lit(res['dd'])}")
+    w.line(f"ov[{rows['ok'][0]}, c] = 1.0 if good else 0.0")
     return w.lines
 
 
@@ -428,17 +441,17 @@ def linear_kf_source(n: int, m: int, pats: tuple) -> str:
         f'"""Generated by pursuit._compiled.kf_codegen for n={n}, m={m}, patterns {pats}: do not edit."""',
         "import math",
         "import numpy as np",
-        "from numba import njit, prange",
-        "from pursuit._compiled.common import fma",
+        "from numba import njit",
+        "from pursuit._compiled.common import fma, log_positive",
         f"LOG_2PI = {math.log(2.0 * math.pi)!r}",
+        f"SEQUENCE_BLOCK = {SEQUENCE_BLOCK}",
+        f"STEP_BLOCK = {STEP_BLOCK}",
         "",
     ]
-    opts = "cache=True, error_model='numpy'"
+    opts = "cache=True, nogil=True, error_model='numpy'"
     tail = [
         "",
-        f"sequence_serial = njit({opts})(_sequence)",
-        f"sequence_parallel = njit(parallel=True, {opts})(_sequence)",
-        f"step_serial = njit({opts})(_step)",
-        f"step_parallel = njit(parallel=True, {opts})(_step)",
+        f"sequence = njit({opts})(_sequence)",
+        f"step = njit({opts})(_step)",
     ]
     return "\n".join(head + _sequence_source(n, m, pats) + [""] + _step_source(n, m, pats) + tail) + "\n"

@@ -38,6 +38,7 @@ from .common import (
     h_one,
     n_uniforms,
     resample_counts,
+    serial_and_parallel,
     wrap,
 )
 from .streams import fill_normal, fill_random, next_random
@@ -721,6 +722,5 @@ def _pf_resample(logw_out, need, U, rkind, Xout):
             _resample_run(r, rkind, Xout[r].copy(), e, U[r], Xout, logw_out, logN)
 
 
-pf_step_parallel = njit(cache=True, parallel=True, error_model="numpy")(_pf_step)
-pf_step_serial = njit(cache=True, error_model="numpy")(_pf_step)
+pf_step_serial, pf_step_parallel = serial_and_parallel(_pf_step, cache=True, error_model="numpy")
 pf_resample_parallel = njit(cache=True, parallel=True, error_model="numpy")(_pf_resample)
