@@ -15,8 +15,10 @@ core).
   arithmetic for scale.  The sum of draw and ``exp`` bounds the compiled
   bootstrap PF's rate from above.
 * **Kalman step split.** The compiled KF (4-state CV, position measured,
-  1000 runs, 1 thread): the compiled step kernel called directly on the
-  lane-major arrays; ``pursuit.run`` stepping from Python
+  1000 runs, 1 thread): the block step kernel (what a nonlinear EKF and
+  the UKF/CKF use) and the step kernel generated for the linear model
+  (``pursuit._compiled.kf_codegen``), each called directly on lane-major
+  arrays; ``pursuit.run`` stepping from Python
   (``sequence=False``: the per-step call, the step info arrays and copying
   every step's results into the track); and ``pursuit.run`` as it runs by
   default, all steps in one compiled call.
@@ -93,11 +95,18 @@ def particle_floor(n: int) -> list[tuple[str, float]]:
     return [(label, t / n * 1e9) for label, t in rows]
 
 
-def kalman_split(runs: int, steps: int) -> tuple[float, float, float]:
-    """(step kernel alone, run step by step, run in one call) filter-steps per second of the compiled KF, one thread."""
+def kalman_split(runs: int, steps: int) -> tuple[float, float, float, float]:
+    """Filter-steps per second of the compiled KF, one thread.
+
+    Returns (block kernel alone, generated step kernel alone, run step by
+    step, run in one call): the block kernel is what the EKF with a
+    nonlinear measurement and the UKF/CKF use; a linear measurement runs the
+    kernels generated for the model's structure (``pursuit._compiled.kf_codegen``).
+    """
     import numba
 
     from pursuit._compiled import gauss_kernels as GK
+    from pursuit._compiled import generated, kf_codegen
     from pursuit._compiled.particle import measurement_args
     from pursuit.models import ConstantVelocity, LinearGaussian
 
@@ -108,6 +117,7 @@ def kalman_split(runs: int, steps: int) -> tuple[float, float, float]:
     filt = pu.KalmanFilter(motion, meas, backend="numba")
     prior = pu.Gaussian(np.zeros(4), np.eye(4))
     pu.run(filt, zs[:2], prior, keep_cov=False)  # compile
+    pu.run(filt, zs[:2], prior, keep_cov=False, sequence=False)
     whole = runs * steps / _median_time(lambda: pu.run(filt, zs, prior, keep_cov=False), 3)
     stepped = runs * steps / _median_time(lambda: pu.run(filt, zs, prior, keep_cov=False, sequence=False), 3)
 
@@ -121,16 +131,32 @@ def kalman_split(runs: int, steps: int) -> tuple[float, float, float]:
             np.empty((n, n, runs)), np.empty((m, runs)), np.empty((m, m, runs)), np.empty(runs),
             np.empty(runs, dtype=np.int64), np.empty(runs), np.ones(runs, dtype=np.bool_))
     margs = measurement_args(hs)
+    x0 = np.zeros((n, runs))
+    P0 = np.ascontiguousarray(np.broadcast_to(np.eye(n)[..., None], (n, n, runs)))
 
-    def kernel_only():
-        x, P = np.zeros((n, runs)), np.ascontiguousarray(np.broadcast_to(np.eye(n)[..., None], (n, n, runs)))
+    def block_only():
+        x, P = x0, P0
         for k in range(steps):
             GK.ekf_step_serial(x, P, zl[k], valid[k], F, Q, 1.0, *margs, *outs)
             x, P = outs[0].copy(), outs[1].copy()
 
-    kernel = runs * steps / _median_time(kernel_only, 3)
+    gen = generated.linear_kf_kernels(F, Q, hs.A, hs.R)
+    rows = kf_codegen.step_rows(n, m)
+    out = np.empty((sum(c for _, c in rows.values()), runs))
+    nblocks = -(-runs // gen.STEP_BLOCK)
+
+    def generated_only():
+        x, P = x0, P0
+        for k in range(steps):
+            gen.step(x, P, zl[k], valid[k], F, Q, 1.0, hs.A, hs.R, out, 0, nblocks)
+            x = out[rows["x"][0]:rows["x"][0] + n].copy()
+            P = out[rows["P"][0]:rows["P"][0] + n * n].reshape(n, n, runs).copy()
+
+    generated_only()  # compile
+    block = runs * steps / _median_time(block_only, 3)
+    unrolled = runs * steps / _median_time(generated_only, 3)
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
-    return kernel, stepped, whole
+    return block, unrolled, stepped, whole
 
 
 def main(quick: bool = False) -> dict:
@@ -157,15 +183,16 @@ def main(quick: bool = False) -> dict:
               f"{new:.1f} ns, at most {1e3 / new:.0f} M particle-steps/s per core.")
     print()
     runs, steps = (200, 50) if quick else (1000, 300)
-    kernel, stepped, whole = kalman_split(runs, steps)
+    block, kernel, stepped, whole = kalman_split(runs, steps)
     print(f"**Compiled KF, 4-state CV, position measured, {runs} runs x {steps} steps, one thread**\n")
     print("| measured | M filter-steps/s |")
     print("|---|---|")
-    print(f"| step kernel alone (lane-major arrays, no Python between steps) | {kernel / 1e6:.2f} |")
+    print(f"| block step kernel alone (nonlinear EKF and UKF/CKF path; lane-major arrays, no Python between steps) | {block / 1e6:.2f} |")
+    print(f"| generated step kernel alone (the linear KF's, unrolled for the model's structure) | {kernel / 1e6:.2f} |")
     print(f"| `pursuit.run(..., sequence=False)` (per-step call, step info, results copied into the track) | {stepped / 1e6:.2f} |")
     print(f"| `pursuit.run` (all steps in one compiled call, the default) | {whole / 1e6:.2f} |")
     print()
-    return {"particle_floor_ns": floor, "kf_kernel": kernel, "kf_run_stepped": stepped, "kf_run": whole}
+    return {"particle_floor_ns": floor, "kf_block_kernel": block, "kf_kernel": kernel, "kf_run_stepped": stepped, "kf_run": whole}
 
 
 if __name__ == "__main__":

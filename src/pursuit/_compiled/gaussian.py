@@ -22,8 +22,8 @@ from ..filters.gaussian import GaussianState
 from ..gaussian import Gaussian
 from . import gauss_kernels as GK
 from . import generated, kf_codegen
-from .specs import M_LINEAR
 from .particle import measurement_args, use_parallel
+from .specs import M_LINEAR
 
 __all__ = ["gaussian_step", "gaussian_sequence", "lanes"]
 

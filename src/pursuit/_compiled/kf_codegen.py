@@ -22,11 +22,17 @@ A run whose innovation covariance does not factor is flagged in ``ok`` for
 the caller to recompute with NumPy, as in the block kernels.
 
 Two kernels come from one body, so they give the same bits: ``sequence``
-(all steps of a block of runs, the state kept in block arrays) and
-``step`` (one step, lane-major inputs and outputs, with the prediction
-and cross-covariance the smoother needs).  Each has a serial and a
-``parallel=True`` build.  The source is a pure function of
-``(n, m)`` and the four zero patterns, so it can be cached on disk (see
+(all steps of a block of runs, the state kept in one flat workspace, the
+results written in the track's layout) and ``step`` (one step, lane-major
+inputs, every result in one lane-major output array whose row ranges
+:func:`step_rows` gives, the prediction and cross-covariance the smoother
+needs included).  Both are serial, release the GIL and take a range of
+blocks ``[b0, b1)``, so :func:`pursuit._compiled.generated.run_blocks` can
+share the blocks among threads.  Every sum of products is written with
+explicit ``fma`` calls and nothing is left to the compiler's contraction,
+which would otherwise depend on how often a product is used and so differ
+between the two kernels.  The source is a pure function of ``(n, m)`` and
+the four zero patterns, so it can be cached on disk (see
 :mod:`pursuit._compiled.generated`).
 """
 
@@ -41,7 +47,7 @@ __all__ = ["linear_kf_source", "structure_key"]
 #: Runs per block of the sequence kernel: the block's state (about 1 KB per
 #: lane for n = 4) stays in the first-level caches between steps.
 SEQUENCE_BLOCK = 128
-#: Runs per parallel chunk of the step kernel.
+#: Runs per block of the step kernel (its output rows of a block stay in the second-level cache).
 STEP_BLOCK = 256
 
 SEQUENCE_ARGS = "xinit, Pinit, zs, F, Q, lam, H, R, keep_cov, means, covs, innov, S_out, nis, dof, loglik, ok, b0, b1"
@@ -417,7 +423,7 @@ def _step_source(n: int, m: int, pats: tuple) -> list[str]:
 
 
 def linear_kf_source(n: int, m: int, pats: tuple) -> str:
-    """Module source with ``sequence_serial``, ``sequence_parallel``, ``step_serial`` and ``step_parallel``.
+    """Module source defining the jitted kernels ``sequence`` and ``step`` and their block sizes.
 
     Parameters
     ----------
