@@ -134,3 +134,35 @@ def test_load_module_replaces_a_damaged_file(tmp_path, monkeypatch):
     again = generated.load_module("probe", source)
     assert first.VALUE == again.VALUE == 42
     assert path.read_text() == source
+
+
+def test_threads_split_the_blocks_and_give_the_same_bits():
+    """run_blocks shares the blocks of runs among threads; each run's bits do not depend on the split."""
+    motion, meas = _models("cv2d-m2")
+    zs, prior = _data(motion, meas, M=300, T=6)  # 3 blocks of the sequence kernel, 2 of the step kernel
+    filt = pu.KalmanFilter(motion, meas, backend="numba")
+    before = numba.get_num_threads()
+    try:
+        tracks = {}
+        for threads in (1, 2):
+            numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+            tracks[threads] = (pu.run(filt, zs, prior, keep_cov=True), pu.run(filt, zs, prior, keep_cov=True, sequence=False))
+    finally:
+        numba.set_num_threads(before)
+    for a, b in zip(tracks[1], tracks[2]):
+        assert np.array_equal(a.mean, b.mean) and np.array_equal(a.cov, b.cov)
+        assert np.array_equal(a.info["loglik"], b.info["loglik"])
+
+
+def test_run_blocks_covers_every_block_once():
+    seen = []
+
+    def kernel(tag, b0, b1):
+        seen.extend(range(b0, b1))
+
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    generated.run_blocks(kernel, ("t",), runs=1000, block=128, parallel=True)
+    assert sorted(seen) == list(range(8))
+    seen.clear()
+    generated.run_blocks(kernel, ("t",), runs=5, block=128, parallel=True)
+    assert seen == [0]

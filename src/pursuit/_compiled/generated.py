@@ -34,6 +34,7 @@ ENV_VAR = "PURSUIT_KERNEL_DIR"
 _modules: dict[tuple, ModuleType] = {}
 _lock = threading.Lock()
 _pool: ThreadPoolExecutor | None = None
+_pool_size = 0
 
 
 def _writable(path: Path) -> bool:
@@ -106,7 +107,7 @@ def run_blocks(kernel, args: tuple, runs: int, block: int, parallel: bool) -> No
     function would share numba's cache entry.)  Each run's result is the
     same whichever thread computes it.
     """
-    global _pool
+    global _pool, _pool_size
     import numba
 
     nblocks = -(-runs // block)
@@ -115,8 +116,9 @@ def run_blocks(kernel, args: tuple, runs: int, block: int, parallel: bool) -> No
         kernel(*args, 0, nblocks)
         return
     with _lock:
-        if _pool is None or _pool._max_workers < threads:
-            _pool = ThreadPoolExecutor(max_workers=max(threads, numba.config.NUMBA_NUM_THREADS), thread_name_prefix="pursuit-kernel")
+        if _pool is None or _pool_size < threads:
+            _pool_size = max(threads, numba.config.NUMBA_NUM_THREADS)
+            _pool = ThreadPoolExecutor(max_workers=_pool_size, thread_name_prefix="pursuit-kernel")
         pool = _pool
     bounds = np.linspace(0, nblocks, threads + 1).round().astype(np.int64)
     futures = [pool.submit(kernel, *args, int(bounds[i]), int(bounds[i + 1])) for i in range(threads)]
