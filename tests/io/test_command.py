@@ -148,6 +148,18 @@ def _reader(stream, lines):
         lines.append(line)
 
 
+def _terminal_sigint() -> None:
+    """In the child: SIGINT as a terminal's Ctrl-C finds it (default action, not blocked).
+
+    A child inherits its parent's signal mask and ignored signals; under a test runner started in
+    the background (or from a thread that blocks SIGINT) the stream would never see the signal.
+    """
+    import signal
+
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start_stream():
     """A real ``pursuit track -`` process and the list its output lines are appended to."""
     proc = subprocess.Popen(
@@ -157,6 +169,7 @@ def _start_stream():
         stderr=subprocess.PIPE,
         text=True,
         cwd=ROOT,
+        preexec_fn=_terminal_sigint,
     )
     lines: list[str] = []
     reader = threading.Thread(target=_reader, args=(proc.stdout, lines), daemon=True)
