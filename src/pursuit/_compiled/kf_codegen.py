@@ -42,7 +42,7 @@ import math
 
 import numpy as np
 
-__all__ = ["linear_kf_source", "structure_key"]
+__all__ = ["linear_kf_source", "step_rows", "structure_key"]
 
 #: Runs per block of the sequence kernel: the block's state (about 1 KB per
 #: lane for n = 4) stays in the first-level caches between steps.
