@@ -13,16 +13,7 @@ import pursuit as pu  # noqa: E402
 from pursuit._compiled import generated  # noqa: E402
 from pursuit.models import ConstantAcceleration, ConstantVelocity, LinearGaussian  # noqa: E402
 
-RTOL = 1e-9
-
-
-def _close(a, b, what):
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    assert a.shape == b.shape, what
-    assert np.array_equal(np.isnan(a), np.isnan(b)), f"{what}: NaN pattern differs"
-    fin = np.isfinite(b)
-    err = np.max(np.abs(a[fin] - b[fin]) / (1.0 + np.abs(b[fin]))) if fin.any() else 0.0
-    assert err <= RTOL, f"{what}: relative difference {err:.3g}"
+from .test_numba_backend import _close  # noqa: E402 (the NaN, infinity and 1e-9 agreement check of the compiled tests)
 
 
 def _models(case):

@@ -58,15 +58,7 @@ def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, 
     F, _, _ = ms.arrays(k, dt)
     Q = np.ascontiguousarray(ms.cov(k, dt))
     lam = float(filt.fading.lam)
-    x_out, P_out = np.empty((n, M)), np.empty((n, n, M))
-    xp, Pp, cross = np.empty((n, M)), np.empty((n, n, M)), np.empty((n, n, M))
-    innov, S = np.empty((m, M)), np.empty((m, m, M))
-    nis, loglik = np.empty(M), np.empty(M)
-    dof = np.empty(M, dtype=np.int64)
-    ok = np.ones(M, dtype=np.bool_)
     par = use_parallel(M)
-    margs = measurement_args(hs)
-    outs = (x_out, P_out, xp, Pp, cross, innov, S, nis, dof, loglik, ok)
     gen = _linear_kernels(kind, hs, F, Q)
     if gen is not None:  # one lane-major output array; the results are views of its rows
         rows = kf_codegen.step_rows(n, m)
@@ -81,14 +73,23 @@ def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, 
         innov, S = part("innov", (m,)), part("S", (m, m))
         nis, loglik = out[rows["nis"][0]], out[rows["loglik"][0]]
         dof, ok = out[rows["dof"][0]].astype(np.int64), out[rows["ok"][0]] > 0.0
-    elif kind == "ekf":
-        (GK.ekf_step_parallel if par else GK.ekf_step_serial)(x, P, zl, valid, F, Q, lam, *margs, *outs)
-    else:
-        cscale, wm, wc = filt._weights(n)
-        centre = wm.shape[0] % 2 == 1
-        (GK.sigma_step_parallel if par else GK.sigma_step_serial)(
-            x, P, zl, valid, F, Q, lam, *margs, float(cscale), np.ascontiguousarray(wm), np.ascontiguousarray(wc), centre, *outs
-        )
+    else:  # the block kernels write into arrays of their own
+        x_out, P_out = np.empty((n, M)), np.empty((n, n, M))
+        xp, Pp, cross = np.empty((n, M)), np.empty((n, n, M)), np.empty((n, n, M))
+        innov, S = np.empty((m, M)), np.empty((m, m, M))
+        nis, loglik = np.empty(M), np.empty(M)
+        dof = np.empty(M, dtype=np.int64)
+        ok = np.ones(M, dtype=np.bool_)
+        margs = measurement_args(hs)
+        outs = (x_out, P_out, xp, Pp, cross, innov, S, nis, dof, loglik, ok)
+        if kind == "ekf":
+            (GK.ekf_step_parallel if par else GK.ekf_step_serial)(x, P, zl, valid, F, Q, lam, *margs, *outs)
+        else:
+            cscale, wm, wc = filt._weights(n)
+            centre = wm.shape[0] % 2 == 1
+            (GK.sigma_step_parallel if par else GK.sigma_step_serial)(
+                x, P, zl, valid, F, Q, lam, *margs, float(cscale), np.ascontiguousarray(wm), np.ascontiguousarray(wc), centre, *outs
+            )
     info = {
         "innovation": innov.T,
         "S": S.transpose(2, 0, 1),
