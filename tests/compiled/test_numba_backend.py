@@ -253,7 +253,9 @@ from pursuit.scenarios.ungm import UNGM
 from pursuit._compiled import pf_kernels as K, gauss_kernels as GK, generated
 from pursuit.models import ConstantVelocity, LinearGaussian, RangeSensors
 sc = UNGM(steps=3); sim = sc.simulate(run_streams(1, range(2), 0), 2)
-pu.run(pu.BootstrapParticleFilter(sc.motion, sc.measurement, particles=50, backend="numba"), sim.measurements, sim.prior, rng=run_streams(2, range(2), 1))
+pf = pu.BootstrapParticleFilter(sc.motion, sc.measurement, particles=50, backend="numba")
+pu.run(pf, sim.measurements, sim.prior, rng=run_streams(2, range(2), 1))
+pu.run(pf, sim.measurements, sim.prior, rng=run_streams(2, range(2), 1), sequence=False)
 mot = ConstantVelocity(); meas = LinearGaussian.position(4, (0, 2), 1.0)
 prior = pu.Gaussian(np.array([1.0, 0.0, 1.0, 0.0]), np.eye(4))
 kf = pu.KalmanFilter(mot, meas, backend="numba")
@@ -263,7 +265,7 @@ ekf = pu.ExtendedKalmanFilter(mot, RangeSensors([[0.0, 0.0], [50.0, 0.0]], 1.0, 
 pu.run(ekf, np.full((3, 2, 2), 10.0), prior)
 pu.run(ekf, np.full((3, 2, 2), 10.0), prior, sequence=False)
 (gen,) = generated._modules.values()
-for d in (K.pf_step_parallel, GK.ekf_sequence_parallel, GK.ekf_step_parallel, gen.sequence, gen.step):
+for d in (K.pf_sequence_parallel, K.pf_step_parallel, GK.ekf_sequence_parallel, GK.ekf_step_parallel, gen.sequence, gen.step):
     print(d.__name__ if hasattr(d, "__name__") else d, dict(d.stats.cache_hits), dict(d.stats.cache_misses))
 """
     env = dict(os.environ, PURSUIT_KERNEL_DIR=str(tmp_path / "kernels"))
@@ -273,7 +275,7 @@ for d in (K.pf_step_parallel, GK.ekf_sequence_parallel, GK.ekf_step_parallel, ge
     second = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env=env)
     assert second.returncode == 0, second.stderr
     lines = [ln for ln in second.stdout.splitlines() if "{" in ln]
-    assert len(lines) == 5
+    assert len(lines) == 6
     for ln in lines:
         hits, misses = ln.split("} {")
         assert ": 1" in hits or ": 2" in hits, ln  # loaded from the cache

@@ -21,7 +21,7 @@ from .common import R_MULTINOMIAL, R_RESIDUAL, R_STRATIFIED, R_SYSTEMATIC
 from .specs import MeasurementSpec, MotionSpec
 from .streams import stream_addresses
 
-__all__ = ["bootstrap_step", "run_stream_addresses", "use_parallel", "RESAMPLER_CODES", "measurement_args"]
+__all__ = ["bootstrap_step", "bootstrap_sequence", "run_stream_addresses", "use_parallel", "RESAMPLER_CODES", "measurement_args"]
 
 RESAMPLER_CODES = {
     "systematic": R_SYSTEMATIC,
@@ -138,6 +138,58 @@ def bootstrap_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Parti
         work=work,
     )
     return new, info
+
+
+def bootstrap_sequence(filt, specs: tuple[MotionSpec, MeasurementSpec], state: ParticleState, zs: np.ndarray, keep_cov: bool):
+    """All steps of ``zs (T, *batch, m)`` in one compiled call, or ``None`` where the runs cannot draw themselves.
+
+    The same bits as T calls of :func:`bootstrap_step` (the kernel runs the
+    same step body, run by run, in the same draw order), returned as
+    ``(means, covs, info)`` with time first, the layout of
+    :class:`pursuit.Track`.  Each run's stream is left where T steps would
+    leave it.
+    """
+    ms, hs = specs
+    batch, B = flat_batch(state.particles)
+    N, n = state.particles.shape[-2:]
+    m = hs.dim
+    T = zs.shape[0]
+    addrs, per_run = run_stream_addresses(state.rng, state.work)
+    if not per_run or T == 0:
+        return None
+    X0 = np.ascontiguousarray(state.particles, dtype=float).reshape(B, N, n)
+    logw0 = np.ascontiguousarray(state.logw, dtype=float).reshape(B, N)
+    zf = np.ascontiguousarray(zs, dtype=float).reshape(T, B, m)
+    valid = ~np.isnan(zf)
+    steps = [ms.arrays(k, None) for k in range(1, T + 1)]
+    Fs, Gs, pars = (np.ascontiguousarray(np.stack(part)) for part in zip(*steps))
+    q = Gs.shape[2] if ms.kind == 0 else 1
+    noise = np.empty((B, N * q))
+    Xa, Xb = np.empty((B, N, n)), np.empty((B, N, n))
+    la, lb = np.empty((B, N)), np.empty((B, N))
+    means = np.empty((T, B, n))
+    covs = np.empty((T if keep_cov else 1, B, n, n))
+    innov, S = np.empty((T, B, m)), np.empty((T, B, m, m))
+    nis, loglik, ess = np.empty((T, B)), np.empty((T, B)), np.empty((T, B))
+    dof = np.empty((T, B), dtype=np.int64)
+    reset, need = np.empty((T, B), dtype=np.bool_), np.empty((T, B), dtype=np.bool_)
+    kernel = K.pf_sequence_parallel if use_parallel(B) else K.pf_sequence_serial
+    kernel(
+        X0, logw0, noise, zf, valid, addrs, ms.kind, Fs, Gs, pars, *measurement_args(hs), RESAMPLER_CODES[filt.resampler],
+        -1.0 if filt.ess_threshold is None else float(filt.ess_threshold),
+        Xa, Xb, la, lb, means, covs, keep_cov, innov, S, nis, dof, loglik, reset, ess, need,
+    )
+    info = {
+        "innovation": innov.reshape(T, *batch, m),
+        "S": S.reshape(T, *batch, m, m),
+        "nis": nis.reshape(T, *batch),
+        "dof": dof.reshape(T, *batch),
+        "loglik": loglik.reshape(T, *batch),
+        "weights_reset": reset.reshape(T, *batch),
+        "ess": ess.reshape(T, *batch),
+        "resampled": need.reshape(T, *batch),
+    }
+    return means.reshape(T, *batch, n), covs.reshape(T, *batch, n, n) if keep_cov else None, info
 
 
 def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: ParticleState, z: np.ndarray, k: int, dt):

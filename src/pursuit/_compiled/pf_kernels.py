@@ -542,32 +542,34 @@ def _all_uniform(lw, logN):
 
 @njit(cache=True, error_model="numpy")
 def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, thr,
-              Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need):
+              Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, uniform_known, ws):
     """The whole step of run r for UNGM motion and measurement (n = m = 1).
 
     Same arithmetic as :func:`_fast_run`, arranged in branch-free passes
     over the particles that the compiler vectorises (propagation and
     log-weights, ``exp``, the weighted sums), so a step costs little more
-    than its normal draws.
+    than its normal draws.  ``ws`` (5, N) is scratch; ``uniform_known``
+    says the log-weights are all −log N (the caller knows the run
+    resampled), which saves checking them.
     """
     N = X.shape[1]
     xin = X[r, :, 0]
     lw = logw[r]
     a = logw_out[r]
-    nz = noise[r]
-    if per_run:
-        fill_normal(addrs[r], nz)
-    uniform = _all_uniform(lw, logN)
+    xp, hx, e, c, wp = ws[0], ws[1], ws[2], ws[3], ws[4]
+    if per_run:  # the noise goes where the particles will be, and is replaced by them
+        fill_normal(addrs[r], xp)
+    else:
+        xp[:] = noise[r]
+    uniform = uniform_known or _all_uniform(lw, logN)
     invN = 1.0 / N
     pa, pb, forcing, sq = par[0], par[1], par[2], par[3]
     iscale = 1.0 / scale
     hR = -0.5 / Rv
     zr = innov[r, 0]
-    xp = np.empty(N)
-    hx = np.empty(N)
     for i in range(N):  # propagate, predict the measurement, log-likelihood
         x = xin[i]
-        xn = nz[i] * sq + (x * (pa + pb / (x * x + 1.0)) + forcing)
+        xn = xp[i] * sq + (x * (pa + pb / (x * x + 1.0)) + forcing)
         xp[i] = xn
         h = xn * xn * iscale
         hx[i] = h
@@ -577,7 +579,6 @@ def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, th
     if uniform:
         zhat = _sum(hx) * invN
     else:  # predictive weights exp(offset)/N, offset = log w + log N
-        wp = np.empty(N)
         for i in range(N):
             o = lw[i] + logN
             v = a[i] + o
@@ -586,8 +587,6 @@ def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, th
         zhat = _weighted_sum(wp, hx)
     mx = _max(a)
     rst = False
-    e = np.empty(N)
-    c = np.empty(N)
     if not math.isfinite(mx):
         offset = np.empty(N)
         for i in range(N):
@@ -651,7 +650,8 @@ def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, th
 
 @njit(cache=True, error_model="numpy")
 def _step_body(r, X, logw, noise, z, valid, addrs, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
-               Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need):
+               Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, uniform_known, ws):
+    """Step of run r (see :func:`_pf_step`); ``ws`` (5, N) is scratch, ``uniform_known`` as in :func:`_ungm_run`."""
     N, n = X.shape[1], X.shape[2]
     logN = math.log(N)
     m = z.shape[1]
@@ -662,7 +662,7 @@ def _step_body(r, X, logw, noise, z, valid, addrs, per_run, mk, F, G, par, hk, A
     if all_valid and mk == UNGM and hk == M_UNGM:
         innov[r, 0] = z[r, 0]
         _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, R[0, 0],
-                  rkind, thr, Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need)
+                  rkind, thr, Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, uniform_known, ws)
         return
     if all_valid and not angle:
         zv = innov[r]
@@ -704,8 +704,42 @@ def _pf_step(X, logw, noise, z, valid, addrs, per_run, mk, F, G, par, hk, A, idx
     """One bootstrap-PF step for every run (outputs written in place); see the module docstring."""
     for rr in prange(X.shape[0]):
         r = np.int64(rr)  # prange counts in uint64
+        ws = np.empty((5, X.shape[1]))
         _step_body(r, X, logw, noise, z, valid, addrs, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
-                   Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need)
+                   Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, False, ws)
+
+
+def _pf_sequence(X0, logw0, noise, zs, valids, addrs, mk, Fs, Gs, pars, hk, A, idx, scale, R, angle, rkind, thr,
+                 Xa, Xb, la, lb, means, covs, keep_cov, innov, S, nis, dof, loglik, reset, ess, need):
+    """All K steps of every run, time loop inside the run loop (outputs ``(K, B, ...)``, written in place).
+
+    Run r draws from its own stream (``addrs[r]``; the caller checked that
+    every run has one), so its steps are :func:`_step_body`'s in the same
+    order as K calls of :func:`_pf_step`: the same bits, without returning
+    to Python between steps and with the run's particles still in cache.
+    Step k reads the particles of step k − 1 from one of the two buffers
+    ``Xa``/``Xb`` (``la``/``lb`` for the log-weights) and writes the other;
+    ``X0``/``logw0`` are the prior's.  Covariances go to ``covs[k]``, or
+    all to ``covs[0]`` where ``keep_cov`` is false.  A run that resampled
+    has log-weights of exactly −log N (every resampler writes that), which
+    the next step need not check.
+    """
+    K = zs.shape[0]
+    for rr in prange(X0.shape[0]):
+        r = np.int64(rr)
+        ws = np.empty((5, X0.shape[1]))
+        for k in range(K):
+            c = k if keep_cov else 0
+            known = k > 0 and need[k - 1, r]
+            if k == 0:
+                Xi, li, Xo, lo = X0, logw0, Xa, la
+            elif k % 2 == 1:
+                Xi, li, Xo, lo = Xa, la, Xb, lb
+            else:
+                Xi, li, Xo, lo = Xb, lb, Xa, la
+            _step_body(r, Xi, li, noise, zs[k], valids[k], addrs, True, mk, Fs[k], Gs[k], pars[k], hk, A, idx, scale,
+                       R, angle, rkind, thr, Xo, lo, means[k], covs[c], innov[k], S[k], nis[k], dof[k], loglik[k],
+                       reset[k], ess[k], need[k], known, ws)
 
 
 def _pf_resample(logw_out, need, U, rkind, Xout):
@@ -723,4 +757,5 @@ def _pf_resample(logw_out, need, U, rkind, Xout):
 
 
 pf_step_serial, pf_step_parallel = serial_and_parallel(_pf_step, cache=True, error_model="numpy")
+pf_sequence_serial, pf_sequence_parallel = serial_and_parallel(_pf_sequence, cache=True, error_model="numpy")
 pf_resample_parallel = njit(cache=True, parallel=True, error_model="numpy")(_pf_resample)

@@ -50,10 +50,12 @@ def run(
     keep_info
         Info keys to keep; default all except the smoother's.
     sequence
-        Let a filter that can (a compiled KF/EKF with a time-invariant
-        model, no gate, one batch axis) compute all steps in one call,
-        without Python between steps; the results are the same bits as
-        step by step.  ``False`` always steps from Python.
+        Let a filter that can compute all steps in one call, without
+        Python between steps: a compiled KF/EKF with a time-invariant
+        model, no gate and one batch axis, or a compiled bootstrap PF with
+        one batch axis and per-run PCG64 streams (:class:`pursuit.RunStreams`).
+        The results are the same bits as step by step.  ``False`` always
+        steps from Python.
 
     Returns
     -------

@@ -709,6 +709,30 @@ class BootstrapParticleFilter(ParticleFilterBase):
         info["resampled"] = need
         return ParticleState(X, logw, mean, cov, rng, k, uniform, work=work), info
 
+    def run_sequence(
+        self, state: ParticleState, zs: np.ndarray, *, keep_cov: bool = True
+    ) -> tuple[np.ndarray, np.ndarray | None, dict[str, np.ndarray]] | None:
+        """All steps of ``zs (K, *batch, m)`` in one compiled call, or ``None`` where that does not apply.
+
+        :func:`pursuit.run` asks this first.  It applies to the compiled
+        filter with one batch axis and a :class:`pursuit.RunStreams` of
+        PCG64 streams (each run draws from its own), from a state at step 0;
+        it gives the same bits as calling :meth:`step` K times, and leaves
+        the streams where those steps would.  Returns ``(means, covs, info)``
+        with time first (``covs`` is ``None`` unless ``keep_cov``).
+        """
+        if not self._compiled_batch(state) or state.k != 0 or state.particles.ndim != 3:
+            return None
+        zs = np.asarray(zs, dtype=float)
+        if zs.ndim != 3 or zs.shape[1:-1] != state.batch or zs.shape[-1] != self._specs[1].dim:
+            return None  # the step path broadcasts or reports the shape
+        bad = np.isinf(zs).any(axis=(1, 2))
+        if bad.any():
+            raise ValueError(f"step {int(np.argmax(bad)) + 1}: measurement contains infinity (use NaN for a missing value)")
+        from .._compiled.particle import bootstrap_sequence
+
+        return bootstrap_sequence(self, self._specs, state, zs, keep_cov)
+
 
 SIR = BootstrapParticleFilter
 """Alias: the sampling-importance-resampling filter is the bootstrap filter."""
