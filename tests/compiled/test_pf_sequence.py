@@ -136,3 +136,25 @@ def test_infinite_measurement_names_the_step():
     filt = pu.BootstrapParticleFilter(motion, meas, particles=50, backend="numba")
     with pytest.raises(ValueError, match="step 5: measurement contains infinity"):
         pu.run(filt, zs, prior, rng=run_streams(1, range(3), 1))
+
+
+def test_branch_free_systematic_resampling_matches_the_two_pointer_rule():
+    """systematic_fill_cdf picks, for each position (u0 + j)/N, the first particle whose normalised cumulative weight exceeds it."""
+    from pursuit._compiled.pf_kernels import systematic_fill_cdf
+
+    rng = np.random.default_rng(11)
+    for trial in range(300):
+        N = int(rng.integers(1, 400))
+        e = rng.random(N) ** rng.choice([1.0, 8.0, 60.0])
+        e[rng.random(N) < 0.3] = 0.0  # runs of zero weights: equal b_i
+        e[-1] = max(e[-1], 1e-3)
+        c = np.cumsum(e)
+        u0 = 0.0 if trial == 0 else rng.random()
+        src = rng.standard_normal(N)
+        dst = np.empty(N)
+        systematic_fill_cdf(c, u0, src, dst)
+        positions = (u0 + np.arange(N)) / N
+        cdf = c / c[-1]
+        cdf[-1] = 1.0
+        expected = src[np.minimum(np.searchsorted(cdf, positions, side="right"), N - 1)]
+        assert np.array_equal(dst, expected), trial

@@ -444,18 +444,21 @@ def systematic_fill_cdf(c, u0, src, dst):
 
     With b_i = ceil(N c_i / c_N − u0) the positions (u0 + j)/N below the
     normalised cumulative weight of particle i, output j takes particle
-    #{i: b_i <= j}: a histogram of the b_i, a running sum, a gather.  The
-    last normalised weight is exactly 1, as in the NumPy resampler.
+    #{i: b_i <= j}.  The b_i never decrease (c is a running sum of weights
+    >= 0), so that count is one more than the last i with b_i <= j: store
+    i + 1 at b_i (a later i overwrites an earlier one; unlike a histogram's
+    increments, the stores do not wait on each other), then a running
+    maximum and a gather.  The last normalised weight is exactly 1, as in
+    the NumPy resampler.
     """
     N = c.shape[0]
     s = c[N - 1]
-    hist = np.zeros(N + 1, dtype=np.int64)
+    last = np.zeros(N + 1, dtype=np.int64)
     for i in range(N - 1):
-        hist[int(math.ceil((c[i] / s) * N - u0))] += 1
-    hist[N] += 1
+        last[int(math.ceil((c[i] / s) * N - u0))] = i + 1
     p = 0
     for j in range(N):
-        p += hist[j]
+        p = max(p, last[j])
         dst[j] = src[p]
 
 
@@ -553,7 +556,7 @@ def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, th
     resampled), which saves checking them.
     """
     N = X.shape[1]
-    xin = X[r, :, 0]
+    xin = X[r].reshape(N)  # n = 1; a contiguous view (X[r, :, 0] is strided to numba, which stops vectorisation)
     lw = logw[r]
     a = logw_out[r]
     xp, hx, e, c, wp = ws[0], ws[1], ws[2], ws[3], ws[4]
@@ -630,7 +633,7 @@ def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, th
     ess[r] = es
     nd = thr < 0 or es < thr * N
     need[r] = nd
-    dst = Xout[r, :, 0]
+    dst = Xout[r].reshape(N)
     if nd and per_run and rkind == R_SYSTEMATIC:
         systematic_fill_cdf(c, next_random(addrs[r]), xp, dst)
         for i in range(N):
