@@ -14,6 +14,10 @@ core).
   ``exp``), beside NumPy's own vectorised draw; the UNGM propagation
   arithmetic for scale.  The sum of draw and ``exp`` bounds the compiled
   bootstrap PF's rate from above.
+* **Particle run split.** The compiled bootstrap PF on UNGM (100 runs,
+  100 steps, N = 1000, one thread) through ``pursuit.run`` stepping from
+  Python (``sequence=False``) and as it runs by default, every run's whole
+  sequence in one compiled call.
 * **Kalman step split.** The compiled KF (4-state CV, position measured,
   1000 runs, 1 thread): the block step kernel (what a nonlinear EKF and
   the UKF/CKF use) and the step kernel generated for the linear model
@@ -93,6 +97,35 @@ def particle_floor(n: int) -> list[tuple[str, float]]:
                      _median_time(lambda: fill_normal(addrs[0], out))))
     rows.append(("exp_weight (vectorised exp of the compiled filters), per value", _median_time(lambda: expo_vec(a, out))))
     return [(label, t / n * 1e9) for label, t in rows]
+
+
+def particle_split(runs: int, steps: int, particles: int) -> tuple[float, float]:
+    """Particle-steps per second of the compiled bootstrap PF on UNGM, one thread.
+
+    Returns (run step by step, run in one call): ``pursuit.run(...,
+    sequence=False)`` returns to Python after every step (the step's glue,
+    its info arrays and the copy into the track); by default the whole
+    sequence of every run is one compiled call.  Same draws, same bits.
+    """
+    import numba
+
+    from pursuit.rng import run_streams
+    from pursuit.scenarios.ungm import UNGM
+
+    numba.set_num_threads(1)
+    sc = UNGM(steps=steps)
+    sim = sc.simulate(run_streams(1, range(runs), 0), runs)
+    filt = pu.BootstrapParticleFilter(sc.motion, sc.measurement, particles=particles, backend="numba")
+
+    def go(sequence):
+        pu.run(filt, sim.measurements, sim.prior, rng=run_streams(2, range(runs), 1), sequence=sequence)
+
+    go(True), go(False)  # compile
+    work = runs * steps * particles
+    stepped = work / _median_time(lambda: go(False))
+    whole = work / _median_time(lambda: go(True))
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    return stepped, whole
 
 
 def kalman_split(runs: int, steps: int) -> tuple[float, float, float, float]:
@@ -182,6 +215,14 @@ def main(quick: bool = False) -> dict:
         print(f"With the in-place PCG64 stream (the same numbers) and the vectorised exp the compiled filters use: "
               f"{new:.1f} ns, at most {1e3 / new:.0f} M particle-steps/s per core.")
     print()
+    pruns, psteps, pn = (20, 50, 1000) if quick else (100, 100, 1000)
+    pf_stepped, pf_whole = particle_split(pruns, psteps, pn)
+    print(f"**Compiled bootstrap PF, UNGM, {pruns} runs x {psteps} steps, N = {pn}, one thread**\n")
+    print("| measured | M particle-steps/s |")
+    print("|---|---|")
+    print(f"| `pursuit.run(..., sequence=False)` (back to Python after every step) | {pf_stepped / 1e6:.1f} |")
+    print(f"| `pursuit.run` (every run's whole sequence in one compiled call, the default) | {pf_whole / 1e6:.1f} |")
+    print()
     runs, steps = (200, 50) if quick else (1000, 300)
     block, kernel, stepped, whole = kalman_split(runs, steps)
     print(f"**Compiled KF, 4-state CV, position measured, {runs} runs x {steps} steps, one thread**\n")
@@ -192,7 +233,7 @@ def main(quick: bool = False) -> dict:
     print(f"| `pursuit.run(..., sequence=False)` (per-step call, step info, results copied into the track) | {stepped / 1e6:.2f} |")
     print(f"| `pursuit.run` (all steps in one compiled call, the default) | {whole / 1e6:.2f} |")
     print()
-    return {"particle_floor_ns": floor, "kf_block_kernel": block, "kf_kernel": kernel, "kf_run_stepped": stepped, "kf_run": whole}
+    return {"particle_floor_ns": floor, "pf_run_stepped": pf_stepped, "pf_run": pf_whole, "kf_block_kernel": block, "kf_kernel": kernel, "kf_run_stepped": stepped, "kf_run": whole}
 
 
 if __name__ == "__main__":

@@ -453,10 +453,10 @@ def systematic_fill_cdf(c, u0, src, dst):
     """
     N = c.shape[0]
     s = c[N - 1]
-    last = np.zeros(N + 1, dtype=np.int64)
+    last = np.zeros(N + 1, dtype=np.int32)
     for i in range(N - 1):
-        last[int(math.ceil((c[i] / s) * N - u0))] = i + 1
-    p = 0
+        last[np.int32(math.ceil((c[i] / s) * N - u0))] = np.int32(i + 1)
+    p = np.int32(0)
     for j in range(N):
         p = max(p, last[j])
         dst[j] = src[p]
@@ -508,20 +508,40 @@ def _weighted_sq_dev(w, x, c):
 
 
 @njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
-def _sq_dev(x, c):
-    """Σ (x_i − c)²."""
+def _sum_sq_scaled(x, scale):
+    """Σ x_i² scale (UNGM's predicted measurements h_i = x_i² / s, summed)."""
     acc = 0.0
     for i in range(x.shape[0]):
-        d = x[i] - c
+        acc += x[i] * x[i] * scale
+    return acc
+
+
+@njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def _weighted_sum_sq_scaled(w, x, scale):
+    """Σ w_i x_i² scale over the particles of positive weight."""
+    acc = 0.0
+    for i in range(w.shape[0]):
+        acc += w[i] * (x[i] * x[i] * scale) if w[i] > 0 else 0.0
+    return acc
+
+
+@njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def _sq_scaled_dev(x, scale, c):
+    """Σ (x_i² scale − c)²."""
+    acc = 0.0
+    for i in range(x.shape[0]):
+        d = x[i] * x[i] * scale - c
         acc += d * d
     return acc
 
 
 @njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
-def _sum(x):
+def _weighted_sq_scaled_dev(w, x, scale, c):
+    """Σ w_i (x_i² scale − c)² over the particles of positive weight."""
     acc = 0.0
-    for i in range(x.shape[0]):
-        acc += x[i]
+    for i in range(w.shape[0]):
+        d = x[i] * x[i] * scale - c
+        acc += w[i] * (d * d) if w[i] > 0 else 0.0
     return acc
 
 
@@ -551,7 +571,7 @@ def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, th
     Same arithmetic as :func:`_fast_run`, arranged in branch-free passes
     over the particles that the compiler vectorises (propagation and
     log-weights, ``exp``, the weighted sums), so a step costs little more
-    than its normal draws.  ``ws`` (5, N) is scratch; ``uniform_known``
+    than its normal draws.  ``ws`` (4, N) is scratch; ``uniform_known``
     says the log-weights are all −log N (the caller knows the run
     resampled), which saves checking them.
     """
@@ -559,7 +579,7 @@ def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, th
     xin = X[r].reshape(N)  # n = 1; a contiguous view (X[r, :, 0] is strided to numba, which stops vectorisation)
     lw = logw[r]
     a = logw_out[r]
-    xp, hx, e, c, wp = ws[0], ws[1], ws[2], ws[3], ws[4]
+    xp, e, c, wp = ws[0], ws[1], ws[2], ws[3]
     if per_run:  # the noise goes where the particles will be, and is replaced by them
         fill_normal(addrs[r], xp)
     else:
@@ -574,20 +594,19 @@ def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, th
         x = xin[i]
         xn = xp[i] * sq + (x * (pa + pb / (x * x + 1.0)) + forcing)
         xp[i] = xn
-        h = xn * xn * iscale
-        hx[i] = h
+        h = xn * xn * iscale  # recomputed from xp where needed: one array less in cache
         d = zr - h
         v = d * d * hR
         a[i] = v if v == v else -np.inf  # a NaN likelihood counts as zero
     if uniform:
-        zhat = _sum(hx) * invN
+        zhat = _sum_sq_scaled(xp, iscale) * invN
     else:  # predictive weights exp(offset)/N, offset = log w + log N
         for i in range(N):
             o = lw[i] + logN
             v = a[i] + o
             a[i] = v if v == v else -np.inf
             wp[i] = exp_weight(o) * invN
-        zhat = _weighted_sum(wp, hx)
+        zhat = _weighted_sum_sq_scaled(wp, xp, iscale)
     mx = _max(a)
     rst = False
     if not math.isfinite(mx):
@@ -613,9 +632,9 @@ def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, th
     inv = 1.0 / s
     mu = _weighted_sum(e, xp) * inv
     if uniform:
-        pz = _sq_dev(hx, zhat) * invN
+        pz = _sq_scaled_dev(xp, iscale, zhat) * invN
     else:
-        pz = _weighted_sq_dev(wp, hx, zhat)
+        pz = _weighted_sq_scaled_dev(wp, xp, iscale, zhat)
     c2 = _weighted_sq_dev(e, xp, mu)
     mean[r, 0] = mu
     cov[r, 0, 0] = c2 * inv
@@ -654,7 +673,7 @@ def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, th
 @njit(cache=True, error_model="numpy")
 def _step_body(r, X, logw, noise, z, valid, addrs, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
                Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, uniform_known, ws):
-    """Step of run r (see :func:`_pf_step`); ``ws`` (5, N) is scratch, ``uniform_known`` as in :func:`_ungm_run`."""
+    """Step of run r (see :func:`_pf_step`); ``ws`` (4, N) is scratch, ``uniform_known`` as in :func:`_ungm_run`."""
     N, n = X.shape[1], X.shape[2]
     logN = math.log(N)
     m = z.shape[1]
@@ -707,7 +726,7 @@ def _pf_step(X, logw, noise, z, valid, addrs, per_run, mk, F, G, par, hk, A, idx
     """One bootstrap-PF step for every run (outputs written in place); see the module docstring."""
     for rr in prange(X.shape[0]):
         r = np.int64(rr)  # prange counts in uint64
-        ws = np.empty((5, X.shape[1]))
+        ws = np.empty((4, X.shape[1]))
         _step_body(r, X, logw, noise, z, valid, addrs, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
                    Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, False, ws)
 
@@ -730,7 +749,7 @@ def _pf_sequence(X0, logw0, noise, zs, valids, addrs, mk, Fs, Gs, pars, hk, A, i
     K = zs.shape[0]
     for rr in prange(X0.shape[0]):
         r = np.int64(rr)
-        ws = np.empty((5, X0.shape[1]))
+        ws = np.empty((4, X0.shape[1]))
         for k in range(K):
             c = k if keep_cov else 0
             known = k > 0 and need[k - 1, r]
