@@ -12,6 +12,8 @@ from pursuit.models import ConstantVelocity, RangeBearing, RangeSensors  # noqa:
 from pursuit.rng import run_streams  # noqa: E402
 from pursuit.scenarios.ungm import UNGM  # noqa: E402
 
+from .test_sequence import _assert_same_bits  # noqa: E402 (tracks equal bit for bit: means, covariances, every info key)
+
 CV = ConstantVelocity(ndim=2, dt=1.0, q=0.05)
 RANGES = RangeSensors([[0.0, 0.0], [100.0, 0.0], [0.0, 100.0]], 2.0, (0, 2))
 BEARING = RangeBearing([-20.0, 10.0], 2.0, 0.02)
@@ -32,19 +34,6 @@ def _cv(meas, M=9, T=20):
         x = CV.sample(x, k + 1, rng)
         zs[k] = meas.sample(x, k + 1, rng)
     return CV, meas, zs, pu.Gaussian(x0, np.diag([4.0, 0.5, 4.0, 0.5]))
-
-
-def _assert_same_bits(a, b):
-    assert np.array_equal(a.mean, b.mean, equal_nan=True)
-    if b.cov is None:
-        assert a.cov is None
-    else:
-        assert np.array_equal(a.cov, b.cov, equal_nan=True)
-    assert sorted(a.info) == sorted(b.info)
-    for key, value in b.info.items():
-        assert a.info[key].dtype == value.dtype, key
-        assert a.info[key].shape == value.shape, key
-        assert np.array_equal(a.info[key], value, equal_nan=True), key
 
 
 def _states(rs):

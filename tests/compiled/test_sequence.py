@@ -38,6 +38,7 @@ def _assert_same_bits(a, b):
     assert sorted(a.info) == sorted(b.info)
     for key, value in b.info.items():
         assert a.info[key].dtype == value.dtype, key
+        assert a.info[key].shape == value.shape, key
         assert np.array_equal(a.info[key], value, equal_nan=True), key
 
 
