@@ -147,3 +147,18 @@ def test_branch_free_systematic_resampling_matches_the_two_pointer_rule():
         cdf[-1] = 1.0
         expected = src[np.minimum(np.searchsorted(cdf, positions, side="right"), N - 1)]
         assert np.array_equal(dst, expected), trial
+
+
+def test_a_subclass_that_overrides_step_is_stepped_from_python():
+    motion, meas, zs, prior = _ungm(M=3, T=5)
+    calls = []
+
+    class Counting(pu.BootstrapParticleFilter):
+        def step(self, state, z, k=None, dt=None):
+            calls.append(k)
+            return super().step(state, z, k, dt)
+
+    filt = Counting(motion, meas, particles=50, backend="numba")
+    assert filt.run_sequence(filt.init(prior, batch=(3,), rng=run_streams(1, range(3), 1)), zs) is None
+    pu.run(filt, zs, prior, rng=run_streams(1, range(3), 1))
+    assert calls == [1, 2, 3, 4, 5]

@@ -139,3 +139,19 @@ def test_not_used_where_a_step_needs_python():
     assert np.allclose(a.mean, b.mean, rtol=1e-9, atol=1e-9)
     track = pu.run(plain, zs, prior, store_predictions=True)
     assert "pred_mean" in track.info
+
+
+def test_a_subclass_that_overrides_step_is_stepped_from_python():
+    zs, x0 = _data(LINEAR, M=4, T=6)
+    calls = []
+
+    class Counting(pu.KalmanFilter):
+        def step(self, state, z, k=None, dt=None):
+            calls.append(k)
+            return super().step(state, z, k, dt)
+
+    filt = Counting(MOTION, LINEAR, backend="numba")
+    prior = pu.Gaussian(x0, np.eye(4))
+    assert filt.run_sequence(filt.init(prior, batch=(4,)), zs) is None
+    pu.run(filt, zs, prior)
+    assert calls == [1, 2, 3, 4, 5, 6]

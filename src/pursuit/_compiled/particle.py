@@ -3,7 +3,9 @@
 :func:`bootstrap_step` is what ``BootstrapParticleFilter.step`` calls when
 the filter computes with numba: it prepares contiguous arrays and the random
 streams, runs :mod:`pursuit._compiled.pf_kernels`, and builds the same
-``ParticleState`` and info keys as the NumPy step.
+``ParticleState`` and info keys as the NumPy step.  :func:`bootstrap_sequence`
+is what ``BootstrapParticleFilter.run_sequence`` calls: every step of every
+run in one kernel call, returned in :class:`pursuit.Track`'s layout.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Compiled bootstrap particle filter: one step for a batch of runs, parallel over runs.
+"""Compiled bootstrap particle filter: one step, or the whole sequence, for a batch of runs, parallel over runs.
 
 Each run is processed by one thread from start to end (propagate, weigh,
 moments, resample) with its particles in cache, drawing from its own PCG64
@@ -8,7 +8,8 @@ depend on the batch.  Where the kernels cannot draw themselves (one shared
 Generator, or streams that are not distinct PCG64s) the caller draws the
 noise with NumPy in the NumPy filter's order and passes it in
 (``per_run=False``), and resampling is a second kernel after the caller has
-drawn the uniforms of the runs that resample.
+drawn the uniforms of the runs that resample.  :func:`_pf_sequence` runs
+all steps of each run in one call (the same step body, so the same bits).
 
 The arithmetic follows :class:`pursuit.filters.particle.ParticleFilterBase`
 step by step (see its module docstring for the meaning of every output);

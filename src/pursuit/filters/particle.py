@@ -719,8 +719,11 @@ class BootstrapParticleFilter(ParticleFilterBase):
         PCG64 streams (each run draws from its own), from a state at step 0;
         it gives the same bits as calling :meth:`step` K times, and leaves
         the streams where those steps would.  Returns ``(means, covs, info)``
-        with time first (``covs`` is ``None`` unless ``keep_cov``).
+        with time first (``covs`` is ``None`` unless ``keep_cov``).  A
+        subclass that overrides :meth:`step` is stepped from Python.
         """
+        if type(self).step is not BootstrapParticleFilter.step:
+            return None
         if not self._compiled_batch(state) or state.k != 0 or state.particles.ndim != 3:
             return None
         zs = np.asarray(zs, dtype=float)
