@@ -77,7 +77,7 @@ def _resample_with_numpy_draws(rng, need: np.ndarray, rkind: int, N: int, logw_o
 
 
 def _step_info(batch, m, innov, S, nis, dof, loglik, reset, ess, need) -> dict[str, np.ndarray]:
-    """The info keys every particle filter step reports, reshaped to the batch."""
+    """The info keys every particle filter step reports, reshaped to ``batch`` (``(T, *batch)`` for a whole sequence)."""
     return {
         "innovation": innov.reshape(*batch, m),
         "S": S.reshape(*batch, m, m),
@@ -181,16 +181,7 @@ def bootstrap_sequence(filt, specs: tuple[MotionSpec, MeasurementSpec], state: P
         -1.0 if filt.ess_threshold is None else float(filt.ess_threshold),
         Xa, Xb, la, lb, means, covs, keep_cov, innov, S, nis, dof, loglik, reset, ess, need,
     )
-    info = {
-        "innovation": innov.reshape(T, *batch, m),
-        "S": S.reshape(T, *batch, m, m),
-        "nis": nis.reshape(T, *batch),
-        "dof": dof.reshape(T, *batch),
-        "loglik": loglik.reshape(T, *batch),
-        "weights_reset": reset.reshape(T, *batch),
-        "ess": ess.reshape(T, *batch),
-        "resampled": need.reshape(T, *batch),
-    }
+    info = _step_info((T, *batch), m, innov, S, nis, dof, loglik, reset, ess, need)
     return means.reshape(T, *batch, n), covs.reshape(T, *batch, n, n) if keep_cov else None, info
 
 
