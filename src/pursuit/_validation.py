@@ -20,6 +20,8 @@ __all__ = [
     "nonnegative",
     "positive_int",
     "in_range",
+    "no_infinite_measurement",
+    "no_infinite_measurements",
 ]
 
 
@@ -134,3 +136,17 @@ def _number(name: str, value) -> float:
     if not np.isfinite(v):
         raise ValueError(f"{name}: must be finite, got {value!r}")
     return v
+
+
+def no_infinite_measurement(z: np.ndarray, k: int) -> None:
+    """Raise ``ValueError`` naming step ``k`` if the measurement ``z`` holds an infinity (a missing value is NaN)."""
+    if np.isinf(z).any():
+        raise ValueError(f"step {k}: measurement contains infinity (use NaN for a missing value)")
+
+
+def no_infinite_measurements(zs: np.ndarray) -> None:
+    """:func:`no_infinite_measurement` for a whole sequence ``(K, ...)``, naming the first step (from 1) with an infinity."""
+    bad = np.isinf(zs).any(axis=tuple(range(1, zs.ndim)))
+    if bad.any():
+        first = int(np.argmax(bad))
+        no_infinite_measurement(zs[first], first + 1)

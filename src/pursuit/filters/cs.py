@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from .._chi2 import chi2_isf
-from .._validation import in_range, nonnegative, positive
+from .._validation import in_range, no_infinite_measurement, nonnegative, positive
 from ..gaussian import Gaussian
 from ..models.maneuver import (
     CS_VARIANCE_FACTOR,
@@ -251,8 +251,7 @@ class _AxisFilter:
             z = np.broadcast_to(z, (*batch, z.shape[-1]))
         if z.shape[-1] != self.axes:
             raise ValueError(f"step {k}: expected {self.axes} measurement components, got {z.shape[-1]}")
-        if np.isinf(z).any():
-            raise ValueError(f"step {k}: measurement contains infinity (use NaN for a missing value)")
+        no_infinite_measurement(z, k)
         r = self._check_R(np.asarray(self.measurement.cov(k), dtype=float))
         x, P = self._split(state.mean, state.cov)
         za = z[..., :, None]

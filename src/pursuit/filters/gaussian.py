@@ -60,7 +60,7 @@ from typing import Any
 import numpy as np
 
 from .._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, mv, numerical_jacobian, quad, symmetrize
-from .._validation import in_range, nonnegative
+from .._validation import in_range, no_infinite_measurement, no_infinite_measurements, nonnegative
 from ..compute import fallback_warning, resolve_backend
 from ..gaussian import Gaussian
 from ..rng import RNGLike
@@ -270,8 +270,7 @@ class _GaussianFilter:
         z = np.asarray(z, dtype=float)
         if z.shape[:-1] != batch:
             z = np.broadcast_to(z, (*batch, z.shape[-1]))
-        if np.isinf(z).any():
-            raise ValueError(f"step {k}: measurement contains infinity (use NaN for a missing value)")
+        no_infinite_measurement(z, k)
         if self._specs is not None and len(batch) <= 1:
             from .._compiled.gaussian import gaussian_step
 
@@ -297,10 +296,7 @@ class _GaussianFilter:
         zs = np.asarray(zs, dtype=float)
         if zs.ndim != 3 or zs.shape[1:-1] != state.batch or zs.shape[-1] != self._specs[1].dim:
             return None  # the step path broadcasts or reports the shape
-        bad = np.isinf(zs).any(axis=tuple(range(1, zs.ndim)))
-        if bad.any():
-            k = int(np.argmax(bad)) + 1
-            raise ValueError(f"step {k}: measurement contains infinity (use NaN for a missing value)")
+        no_infinite_measurements(zs)
         from .._compiled.gaussian import gaussian_sequence
 
         return gaussian_sequence(self, self._specs, state, zs, keep_cov)

@@ -66,7 +66,7 @@ from typing import Any
 import numpy as np
 
 from .._linalg import inv_spd, quad, symmetrize
-from .._validation import in_range, positive_int
+from .._validation import in_range, no_infinite_measurement, no_infinite_measurements, positive_int
 from ..compute import fallback_warning, resolve_backend
 from ..gaussian import Gaussian
 from ..models.measurement import _GaussianNoise, gaussian_loglik
@@ -207,8 +207,7 @@ def _prepare_measurement(z: np.ndarray, batch: tuple[int, ...], k: int) -> np.nd
         z = z.reshape(1)
     if z.shape[:-1] != batch:
         z = np.broadcast_to(z, (*batch, z.shape[-1]))
-    if np.isinf(z).any():
-        raise ValueError(f"step {k}: measurement contains infinity (use NaN for a missing value)")
+    no_infinite_measurement(z, k)
     return z
 
 
@@ -729,9 +728,7 @@ class BootstrapParticleFilter(ParticleFilterBase):
         zs = np.asarray(zs, dtype=float)
         if zs.ndim != 3 or zs.shape[1:-1] != state.batch or zs.shape[-1] != self._specs[1].dim:
             return None  # the step path broadcasts or reports the shape
-        bad = np.isinf(zs).any(axis=(1, 2))
-        if bad.any():
-            raise ValueError(f"step {int(np.argmax(bad)) + 1}: measurement contains infinity (use NaN for a missing value)")
+        no_infinite_measurements(zs)
         from .._compiled.particle import bootstrap_sequence
 
         return bootstrap_sequence(self, self._specs, state, zs, keep_cov)
