@@ -9,7 +9,6 @@ pytest.importorskip("numba")
 
 import pursuit as pu  # noqa: E402
 from pursuit._compiled import streams  # noqa: E402
-from pursuit._compiled.common import exp_weight  # noqa: E402
 from pursuit.filters._workspace import Workspace, recycled  # noqa: E402
 from pursuit.rng import RunStreams, run_streams  # noqa: E402
 from pursuit.scenarios.ungm import UNGM  # noqa: E402
@@ -51,26 +50,6 @@ def test_streams_refused_for_other_bit_generators_and_shared_generators():
     assert streams.stream_addresses([np.random.Generator(np.random.Philox(1))]) is None
     assert streams.stream_addresses([g, g]) is None
     assert streams.stream_addresses([g, np.random.default_rng(2)]).shape == (2,)
-
-
-def test_exp_weight_within_one_ulp_of_libm():
-    from numba import njit
-
-    @njit
-    def vexp(a, out):
-        for i in range(a.shape[0]):
-            out[i] = exp_weight(a[i])
-
-    rng = np.random.default_rng(0)
-    a = np.concatenate([-rng.exponential(5, 200_000), -rng.uniform(0, 708, 200_000), rng.uniform(-1e-3, 12, 10_000),
-                        [0.0, -1e-300, -707.9, -708.0, -708.1, -np.inf, np.nan]])
-    out = np.empty_like(a)
-    vexp(a, out)
-    with np.errstate(all="ignore"):
-        ref = np.where(a > -708.0, np.exp(a), 0.0)
-    pos = ref > 0
-    assert np.array_equal(out > 0, pos)  # the floor at -708 (and -inf, NaN) gives exactly 0
-    assert np.max(np.abs(out[pos] - ref[pos]) / np.spacing(ref[pos])) <= 1.0
 
 
 def test_pf_with_other_bit_generators_draws_with_numpy_and_agrees():
