@@ -297,3 +297,26 @@ def test_gated_gaussian_filters_agree(filt):
     assert np.array_equal(a.info["gated"], b.info["gated"])
     _close(a.mean, b.mean, "mean")
     _close(a.cov, b.cov, "cov")
+
+
+@pytest.mark.parametrize("filt", sorted(GAUSSIAN))
+def test_an_unbatched_run_agrees_with_numpy(filt):
+    """One run with no batch axis: measurements (K, m) to pursuit.run, and step on a state with batch ()."""
+    kind = "linear" if filt == "kf" else "range"
+    mot, zs, prior = _cv_data(MEASUREMENTS[kind], M=2, T=12)
+    zs = zs[:, 1]  # (K, m): the run with one missing component
+    a = pu.run(GAUSSIAN[filt](mot, MEASUREMENTS[kind]), zs, prior)
+    fast = GAUSSIAN[filt](mot, MEASUREMENTS[kind], backend="numba")
+    assert fast.compiled
+    b = pu.run(fast, zs, prior)
+    assert b.mean.shape == a.mean.shape == (12, 4)
+    _close(a.mean, b.mean, "mean")
+    _close(a.cov, b.cov, "cov")
+    for key in a.info:
+        assert np.shape(b.info[key]) == np.shape(a.info[key]), key
+        _close(a.info[key], b.info[key], key)
+    state = fast.init(prior)
+    assert state.batch == ()
+    state, info = fast.step(state, zs[0])
+    assert state.mean.shape == (4,) and state.cov.shape == (4, 4) and info["nis"].shape == ()
+    _close(state.mean, a.mean[0], "step mean")
