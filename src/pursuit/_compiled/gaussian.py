@@ -120,10 +120,10 @@ def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, 
             if key in info:
                 info[key] = np.array(info[key], copy=True)
                 info[key][rows] = np.broadcast_to(value, info[key][rows].shape)
-    if batch != (M,):
-        new_mean = new_mean.reshape(*batch, n)
-        new_cov = new_cov.reshape(*batch, n, n)
-        info = {key: v.reshape(*batch, *v.shape[1:]) for key, v in info.items()}
+    if batch != (M,):  # () for one unbatched run: reshape takes the shape as one tuple, which may be empty
+        new_mean = new_mean.reshape(batch + (n,))
+        new_cov = new_cov.reshape(batch + (n, n))
+        info = {key: v.reshape(batch + v.shape[1:]) for key, v in info.items()}
     return GaussianState(mean=new_mean, cov=new_cov, k=k, memory=None), info
 
 
