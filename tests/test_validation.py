@@ -23,3 +23,24 @@ def test_a_sequence_names_the_first_infinite_step():
     zs[5, 0, 0] = -np.inf
     with pytest.raises(ValueError, match="^step 5: measurement contains infinity"):
         no_infinite_measurements(zs)
+
+
+def test_a_measurement_of_the_wrong_size_names_step_argument_and_shapes():
+    from pursuit._validation import measurement_for_step
+
+    with pytest.raises(ValueError, match=r"^step 3: z: expected shape \(5, 2\) \(m = 2 components per measurement\), got \(5, 3\)$"):
+        measurement_for_step(np.zeros((5, 3)), (5,), 2, 3)
+    with pytest.raises(ValueError, match=r"^step 1: z: expected shape \(5, 2\) for a batch of \(5,\), got \(4, 2\)$"):
+        measurement_for_step(np.zeros((4, 2)), (5,), 2, 1)
+    assert measurement_for_step(np.zeros(2), (5,), 2, 1).shape == (5, 2)  # one measurement for every run
+    assert measurement_for_step(1.5, (), None, 1).shape == (1,)
+
+
+def test_a_prior_of_the_wrong_size_names_the_model_and_both_sizes():
+    from pursuit._validation import prior_of_size
+    from pursuit.models import ConstantVelocity
+
+    prior_of_size(4, 4, ConstantVelocity())
+    prior_of_size(3, None, object())  # a user's model that declares no dim
+    with pytest.raises(ValueError, match=r"^prior: expected 4 state components for the ConstantVelocity motion model .*got 3$"):
+        prior_of_size(3, 4, ConstantVelocity())

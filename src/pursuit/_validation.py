@@ -22,6 +22,9 @@ __all__ = [
     "in_range",
     "no_infinite_measurement",
     "no_infinite_measurements",
+    "model_dim",
+    "measurement_for_step",
+    "prior_of_size",
 ]
 
 
@@ -150,3 +153,43 @@ def no_infinite_measurements(zs: np.ndarray) -> None:
     if bad.any():
         first = int(np.argmax(bad))
         no_infinite_measurement(zs[first], first + 1)
+
+
+def model_dim(model) -> int | None:
+    """The ``dim`` a motion or measurement model declares, or ``None`` for a user's model that does not say."""
+    dim = getattr(model, "dim", None)
+    if isinstance(dim, (int, np.integer)) and not isinstance(dim, bool):
+        return int(dim)
+    return None
+
+
+def measurement_for_step(z, batch: tuple[int, ...], m: int | None, k: int) -> np.ndarray:
+    """The measurement ``z`` as a float array of shape ``(*batch, m)``, broadcast from fewer axes.
+
+    ``m`` is the measurement model's dimension (``None``: any).  A size or
+    shape that cannot be used raises ``ValueError`` naming step ``k``, the
+    expected and the received shape, instead of a broadcasting error deep in
+    a filter.
+    """
+    z = np.asarray(z, dtype=float)
+    if z.ndim == 0:
+        z = z.reshape(1)
+    want = "(" + ", ".join([*map(str, batch), "m" if m is None else str(m)]) + ")"
+    if m is not None and z.shape[-1] != m:
+        raise ValueError(f"step {k}: z: expected shape {want} (m = {m} components per measurement), got {z.shape}")
+    if z.shape[:-1] != batch:
+        try:
+            z = np.broadcast_to(z, (*batch, z.shape[-1]))
+        except ValueError:
+            raise ValueError(f"step {k}: z: expected shape {want} for a batch of {batch}, got {z.shape}") from None
+    no_infinite_measurement(z, k)
+    return z
+
+
+def prior_of_size(prior_dim: int, n: int | None, model) -> None:
+    """Raise ``ValueError`` if a prior of ``prior_dim`` state components does not fit an ``n``-state motion model."""
+    if n is not None and prior_dim != n:
+        raise ValueError(
+            f"prior: expected {n} state components for the {type(model).__name__} motion model (mean shape (*batch, {n}), "
+            f"cov (*batch, {n}, {n})), got {prior_dim}"
+        )

@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from .._chi2 import chi2_isf
-from .._validation import in_range, no_infinite_measurement, nonnegative, positive
+from .._validation import in_range, measurement_for_step, nonnegative, positive
 from ..gaussian import Gaussian
 from ..models.maneuver import (
     CS_VARIANCE_FACTOR,
@@ -246,12 +246,7 @@ class _AxisFilter:
         k = state.k + 1 if k is None else int(k)
         T = float(self.dt if dt is None else dt)
         batch = state.batch
-        z = np.asarray(z, dtype=float)
-        if z.shape[:-1] != batch:
-            z = np.broadcast_to(z, (*batch, z.shape[-1]))
-        if z.shape[-1] != self.axes:
-            raise ValueError(f"step {k}: expected {self.axes} measurement components, got {z.shape[-1]}")
-        no_infinite_measurement(z, k)
+        z = measurement_for_step(z, batch, self.axes, k)
         r = self._check_R(np.asarray(self.measurement.cov(k), dtype=float))
         x, P = self._split(state.mean, state.cov)
         za = z[..., :, None]

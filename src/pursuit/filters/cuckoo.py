@@ -427,7 +427,7 @@ class CuckooParticleFilter(ParticleFilterBase):
     ) -> tuple[ParticleState, dict[str, np.ndarray]]:
         """Propagate, run the cuckoo search, weigh and estimate."""
         k = state.k + 1 if k is None else int(k)
-        z = _prepare_measurement(z, state.batch, k)
+        z = _prepare_measurement(z, state.batch, k, self.measurement)
         if self._compiled_batch(state):
             from .._compiled.particle import cuckoo_step
 

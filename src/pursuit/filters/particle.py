@@ -66,7 +66,7 @@ from typing import Any
 import numpy as np
 
 from .._linalg import inv_spd, quad, symmetrize
-from .._validation import in_range, no_infinite_measurement, no_infinite_measurements, positive_int
+from .._validation import in_range, measurement_for_step, model_dim, no_infinite_measurements, positive_int, prior_of_size
 from ..compute import fallback_warning, resolve_backend
 from ..gaussian import Gaussian
 from ..models.measurement import _GaussianNoise, gaussian_loglik
@@ -201,14 +201,9 @@ def _safe_inverse(S: np.ndarray) -> np.ndarray:
     return np.where(bad[..., None, None], np.nan, inv)
 
 
-def _prepare_measurement(z: np.ndarray, batch: tuple[int, ...], k: int) -> np.ndarray:
-    z = np.asarray(z, dtype=float)
-    if z.ndim == 0:
-        z = z.reshape(1)
-    if z.shape[:-1] != batch:
-        z = np.broadcast_to(z, (*batch, z.shape[-1]))
-    no_infinite_measurement(z, k)
-    return z
+def _prepare_measurement(z: np.ndarray, batch: tuple[int, ...], k: int, measurement: Any = None) -> np.ndarray:
+    """``z`` as ``(*batch, m)``, checked against the measurement model's ``dim`` where it declares one."""
+    return measurement_for_step(z, batch, model_dim(measurement), k)
 
 
 def _sample_prior(prior: Any, batch: tuple[int, ...], N: int, rng) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -419,6 +414,7 @@ class ParticleFilterBase:
         if not batch and isinstance(prior, Gaussian) and prior.mean.ndim > 1:
             batch = prior.mean.shape[:-1]
         X, mean, cov = _sample_prior(prior, batch, self.particles, rng)
+        prior_of_size(X.shape[-1], model_dim(self.motion), self.motion)
         logw = np.broadcast_to(-np.log(self.particles), (*batch, self.particles))
         return ParticleState(X, logw, mean, np.broadcast_to(cov, (*batch, *cov.shape[-2:])), rng, 0, True)
 
@@ -690,7 +686,7 @@ class BootstrapParticleFilter(ParticleFilterBase):
             Time since the previous step (default: the motion model's).
         """
         k = state.k + 1 if k is None else int(k)
-        z = _prepare_measurement(z, state.batch, k)
+        z = _prepare_measurement(z, state.batch, k, self.measurement)
         if self._compiled_batch(state):
             from .._compiled.particle import bootstrap_step
 

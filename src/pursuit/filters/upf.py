@@ -216,7 +216,7 @@ class PartialUPF(ParticleFilterBase):
         """Select, propose (UKF or prior), weigh, estimate and maybe resample."""
         k = state.k + 1 if k is None else int(k)
         batch = state.batch
-        z = _prepare_measurement(z, batch, k)
+        z = _prepare_measurement(z, batch, k, self.measurement)
         rng = state.rng
         work = state.work
         N = self.particles
