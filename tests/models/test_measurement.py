@@ -102,6 +102,12 @@ def test_position_helper():
         (lambda: LinearGaussian([[1.0, 0.0]], [[1.0, 0.5], [0.5, 1.0]]), "R"),
         (lambda: LinearGaussian([[1.0, np.nan]], [[1.0]]), "H"),
         (lambda: RangeBearing([0.0], 1.0, 0.1), "sensor"),
+        (lambda: LinearGaussian.position(4, (0, 2), -1.0), "sigma"),
+        (lambda: LinearGaussian.position(4, (0, 2), [1.0, 0.0]), "sigma"),
+        (lambda: LinearGaussian.position(4, (0, 2), [1.0, 2.0, 3.0]), "sigma"),
+        (lambda: LinearGaussian.position(4, (0, 2), np.nan), "sigma"),
+        (lambda: LinearGaussian.position(4, (0, 4), 1.0), "position_indices"),
+        (lambda: LinearGaussian.position(0, (), 1.0), "state_dim"),
     ],
 )
 def test_bad_parameters_name_the_field(build, field):

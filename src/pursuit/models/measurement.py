@@ -24,7 +24,7 @@ from typing import Sequence
 import numpy as np
 
 from .._linalg import apply_matrix
-from .._validation import as_covariance, as_matrix, as_vector, positive
+from .._validation import as_covariance, as_matrix, as_vector, positive, positive_int
 from ..rng import RNGLike, as_rng
 
 __all__ = [
@@ -122,11 +122,26 @@ class LinearGaussian(_GaussianNoise):
 
     @classmethod
     def position(cls, state_dim: int, position_indices: Sequence[int], sigma: float | Sequence[float]) -> "LinearGaussian":
-        """Measure the given position components with standard deviation ``sigma``."""
+        """Measure the given position components with standard deviation ``sigma`` (one value or one per component).
+
+        Raises
+        ------
+        ValueError
+            If ``sigma`` is not positive and finite or has the wrong length, or an index lies outside the state.
+        """
         idx = list(position_indices)
-        H = np.zeros((len(idx), state_dim))
+        n = positive_int("state_dim", state_dim)
+        for i in idx:
+            if isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not 0 <= i < n:
+                raise ValueError(f"position_indices: expected indices in [0, {n}), got {i!r}")
+        sig = as_vector("sigma", sigma)
+        if sig.shape[0] not in (1, len(idx)):
+            raise ValueError(f"sigma: expected 1 or {len(idx)} values, got {sig.shape[0]}")
+        for s in sig:
+            positive("sigma", s)
+        H = np.zeros((len(idx), n))
         H[np.arange(len(idx)), idx] = 1.0
-        sig = np.broadcast_to(np.asarray(sigma, dtype=float), (len(idx),))
+        sig = np.broadcast_to(sig, (len(idx),))
         return cls(H, np.diag(sig**2))
 
     @property
