@@ -71,3 +71,18 @@ def test_smoother_needs_predictions():
     track = pu.run(pu.KalmanFilter(sc.motion, sc.measurement), sim.measurements, sim.prior)
     with pytest.raises(ValueError, match="store_predictions"):
         pu.rts_smooth(track)
+
+
+@pytest.mark.parametrize("kind", ["pf", "imm"])
+def test_smoother_refuses_filters_it_has_no_smoother_for(kind):
+    sc = LinearCV(ndim=1, steps=4)
+    sim = sc.simulate(np.random.default_rng(0), 2)
+    if kind == "pf":
+        filt = pu.BootstrapParticleFilter(sc.motion, sc.measurement, particles=20)
+    else:
+        kf = pu.KalmanFilter(sc.motion, sc.measurement)
+        filt = pu.filters.InteractingMultipleModel([kf, kf], np.array([[0.9, 0.1], [0.1, 0.9]]))
+    track = pu.run(filt, sim.measurements, sim.prior, rng=1, store_predictions=True)
+    what = "a particle filter" if kind == "pf" else "an interacting multiple model"
+    with pytest.raises(ValueError, match=f"comes from {what}.*no smoother for yet"):
+        pu.rts_smooth(track)

@@ -42,7 +42,9 @@ def rts_smooth(track: Track) -> SmoothedTrack:
     Raises
     ------
     ValueError
-        If the track lacks the predictions or covariances.
+        If the track lacks the predictions or covariances, or comes from a
+        particle filter or an IMM (recognised by their step info, ``ess`` and
+        ``mode_probs``), which have no smoother yet.
 
     Notes
     -----
@@ -50,6 +52,12 @@ def rts_smooth(track: Track) -> SmoothedTrack:
     while the cross-covariance does not; the smoother then uses the inflated
     P⁻ in the gain, which damps the backward correction.
     """
+    kind = _unsmoothable_kind(track)
+    if kind is not None:
+        raise ValueError(
+            f"rts_smooth: track {track.name!r} comes from {kind}, which pursuit has no smoother for yet; "
+            "the RTS smoother takes a Gaussian filter's track (KF, EKF, UKF, CKF or a CS-family filter)"
+        )
     missing = [k for k in SMOOTHER_KEYS if k not in track.info]
     if missing or track.cov is None:
         raise ValueError(
@@ -68,3 +76,12 @@ def rts_smooth(track: Track) -> SmoothedTrack:
         xs[k] = xs[k] + np.einsum("...ij,...j->...i", G, xs[k + 1] - x_pred[k + 1])
         Ps[k] = symmetrize(Ps[k] + G @ (Ps[k + 1] - P_pred[k + 1]) @ np.swapaxes(G, -1, -2))
     return SmoothedTrack(mean=xs, cov=Ps)
+
+
+def _unsmoothable_kind(track: Track) -> str | None:
+    """What kind of filter made ``track`` if it is one without a smoother (by its step info), else ``None``."""
+    if "ess" in track.info:
+        return "a particle filter"
+    if "mode_probs" in track.info:
+        return "an interacting multiple model (IMM) filter"
+    return None
