@@ -285,3 +285,26 @@ def test_a_huge_gap_names_the_time_field(tmp_path, capsys):
         "is a gap the filter cannot predict across (the filter failed: a number overflows)"
     )
     assert "Numerical result out of range" not in "\n".join(err)
+
+
+@pytest.mark.parametrize("skip_bad", [False, True])
+@pytest.mark.parametrize("body", ["", "# a comment\n\n", "1.0,nosuchsensor,3.0\n"])
+def test_a_csv_with_nothing_to_track_is_an_error_and_nothing_is_written(tmp_path, capsys, body, skip_bad):
+    data = tmp_path / "header-only.csv"
+    data.write_text("time,sensor,value\n" + body)
+    out = tmp_path / "est.csv"
+    argv = ["track", str(data), "-c", WSN_MODEL, "-o", str(out)] + (["--skip-bad"] if skip_bad else [])
+    assert main(argv) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert not out.exists()
+    if body.startswith("1.0") and not skip_bad:  # the bad record itself is the error
+        assert "bad record" in err[-1]
+    else:
+        assert err[-1].startswith(f"pursuit track: error: {data}: nothing to track: ") and err[-1].endswith("nothing written")
+
+
+def test_a_stream_with_nothing_to_track_exits_2(capsys, monkeypatch):
+    _stdin(monkeypatch, b"")
+    assert main(["track", "-", "-c", WSN_MODEL]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[-1] == "pursuit track: error: <stdin>: nothing to track: it held no measurement records"

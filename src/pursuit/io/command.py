@@ -169,6 +169,10 @@ def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, st
             file=stderr,
         )
         return EXIT_BAD_INPUT
+    if not result.estimates:
+        what = f"all {len(result.problems)} records were bad" if result.problems else "it holds no measurement records"
+        print(f"pursuit track: error: {source}: nothing to track: {what}; nothing written", file=stderr)
+        return EXIT_BAD_INPUT
     buffer = io.StringIO()
     writer = make_writer(out_fmt, buffer, model.state_labels)
     writer.start()
@@ -248,4 +252,8 @@ def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, s
             out.close()
     if skipped:
         print(f"pursuit track: skipped {skipped} bad record(s) in {source}", file=stderr)
+    if not written:  # the output holds only its header, written when the stream began
+        what = f"all {skipped} records were bad" if skipped else "it held no measurement records"
+        print(f"pursuit track: error: {source}: nothing to track: {what}", file=stderr)
+        return EXIT_BAD_INPUT
     return EXIT_OK
