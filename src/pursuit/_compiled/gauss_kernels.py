@@ -7,8 +7,12 @@ vectorises across runs (explicit loops, no BLAS: a 4 × 4 product through
 BLAS costs more than its arithmetic).  Blocks run in parallel.
 
 The arithmetic follows :mod:`pursuit.filters.gaussian` (predict
-``P⁻ = λ F P Fᵀ + Q``, missing components masked, the Joseph form for
-KF/EKF, ``P⁻ − K S Kᵀ`` for the sigma-point filters).  A run whose
+``P⁻ = λ F P Fᵀ + Q``, missing components masked, and for every filter the
+Joseph form through a Cholesky factor L of P⁻: ``A_L A_Lᵀ + K (R + D) Kᵀ``
+with ``A_L = L − K (H L)``, where H L is the Jacobian times L for the
+KF/EKF (D = 0) and ``Gᵀ = (L⁻¹ Pxz)ᵀ`` summed from the sigma points, with D
+their linearisation-error covariance, for the UKF/CKF; a run that measures
+nothing keeps P⁻ itself).  A run whose
 covariance or innovation covariance does not factor (the NumPy filters
 would repair it) is flagged in ``ok`` and recomputed by the caller with
 NumPy.
@@ -280,21 +284,26 @@ def _jac_block(hk, A, idx, scale, X, H):
 def _update_workspace(n, m, B):
     """Scratch arrays for :func:`_update_ws` (allocated once per block by the sequence kernel)."""
     return (np.empty((m, B)), np.empty((m, m, B)), np.empty((m, m, B)), np.empty((m, m, B)), np.empty(B),
-            np.empty((n, m, B)), np.empty((n, m, B)), np.empty((m, n, B)), np.empty((n, n, B)), np.empty((n, n, B)),
-            np.empty((n, m, B)), np.empty((n, n, B)), np.empty(B), np.empty(B))
+            np.empty((n, m, B)), np.empty((n, m, B)), np.empty((n, n, B)), np.empty((n, m, B)), np.empty((n, n, B)),
+            np.empty(B), np.empty(B))
 
 
 @njit(**_NJ)
-def _update(xp, Pp, zp, Pzz, Pxz, H, z, v, R, angle, joseph, x_o, P_o, innov, S_o, nis, dof, loglik, ok):
-    """Kalman update of one block; v (m, B) is 1.0 where measured, 0.0 where missing."""
-    _update_ws(xp, Pp, zp, Pzz, Pxz, H, z, v, R, angle, joseph, x_o, P_o, innov, S_o, nis, dof, loglik, ok,
+def _update(xp, Pp, zp, Pzz, Pxz, L, HL, D, z, v, R, angle, x_o, P_o, innov, S_o, nis, dof, loglik, ok):
+    """Kalman update of one block; v (m, B) is 1.0 where measured, 0.0 where missing.
+
+    ``L (n, n, B)`` is the Cholesky factor of ``Pp``, ``HL (m, n, B)`` the
+    linearisation times L and ``D (m, m, B)`` the linearisation-error
+    covariance added to R (zeros for the KF/EKF).
+    """
+    _update_ws(xp, Pp, zp, Pzz, Pxz, L, HL, D, z, v, R, angle, x_o, P_o, innov, S_o, nis, dof, loglik, ok,
                _update_workspace(xp.shape[0], zp.shape[0], xp.shape[1]))
 
 
 @njit(**_NJ)
-def _update_ws(xp, Pp, zp, Pzz, Pxz, H, z, v, R, angle, joseph, x_o, P_o, innov, S_o, nis, dof, loglik, ok, ws):
+def _update_ws(xp, Pp, zp, Pzz, Pxz, L, HL, D, z, v, R, angle, x_o, P_o, innov, S_o, nis, dof, loglik, ok, ws):
     """:func:`_update` with its scratch arrays ``ws`` from :func:`_update_workspace`."""
-    nu, S, Reff, Si, ld, Pxm, K, Hm, Am, T, KR, T2, q, dd = ws
+    nu, S, Reff, Si, ld, Pxm, K, AL, KN, T2, q, dd = ws
     n = xp.shape[0]
     m = zp.shape[0]
     B = xp.shape[1]
@@ -329,38 +338,36 @@ def _update_ws(xp, Pp, zp, Pzz, Pxz, H, z, v, R, angle, joseph, x_o, P_o, innov,
         for b in range(m):
             for c in range(B):
                 x_o[i, c] += K[i, b, c] * nu[b, c]
-    if joseph:
-        for a in range(m):
-            for j in range(n):
-                for c in range(B):
-                    Hm[a, j, c] = H[a, j, c] * v[a, c]
-        _bmm(K, Hm, Am)
-        for i in range(n):
-            for j in range(n):
-                eye = 1.0 if i == j else 0.0
-                for c in range(B):
-                    Am[i, j, c] = eye - Am[i, j, c]
-        _bmm(Am, Pp, T)
-        _bmmT(T, Am, P_o)
-        _bmm(K, Reff, KR)
-        _bmmT(KR, K, T2)
-        for i in range(n):
-            for j in range(n):
-                for c in range(B):
-                    P_o[i, j, c] += T2[i, j, c]
-    else:
-        _bmm(K, S, KR)  # KR holds K S here
-        _bmmT(KR, K, P_o)
-        for i in range(n):
-            for j in range(n):
-                for c in range(B):
-                    P_o[i, j, c] = Pp[i, j, c] - P_o[i, j, c]
-    _symmetrize(P_o)
+    # Joseph form through the factor: A_L = (I − K H) L = L − K (H L); K's columns of missing
+    # components are zero, so HL needs no mask
+    _bmm(K, HL, AL)
+    for i in range(n):
+        for j in range(n):
+            for c in range(B):
+                AL[i, j, c] = L[i, j, c] - AL[i, j, c]
+    _bmmT(AL, AL, P_o)
+    for a in range(m):  # the noise R_eff + D, D masked like R
+        for b in range(m):
+            for c in range(B):
+                Reff[a, b, c] += D[a, b, c] * v[a, c] * v[b, c]
+    _bmm(K, Reff, KN)
+    _bmmT(KN, K, T2)
+    for i in range(n):
+        for j in range(n):
+            for c in range(B):
+                P_o[i, j, c] += T2[i, j, c]
     q[:] = 0.0
     dd[:] = 0.0
     for a in range(m):
         for c in range(B):
             dd[c] += v[a, c]
+    for i in range(n):  # nothing measured: the prediction itself, not its factor's L Lᵀ
+        for j in range(n):
+            for c in range(B):
+                if dd[c] == 0.0:
+                    P_o[i, j, c] = Pp[i, j, c]
+    _symmetrize(P_o)
+    for a in range(m):
         for b in range(m):
             for c in range(B):
                 q[c] += nu[a, c] * Si[a, b, c] * nu[b, c]
@@ -438,7 +445,11 @@ def _ekf_step(x, P, z, valid, F, Q, lam, hk, A, idx, scale, R, angle,
         nb, lb = np.empty(B), np.empty(B)
         db = np.empty(B, dtype=np.int64)
         okb = np.ones(B, dtype=np.bool_)
-        _update(xp, Pp, zp, Pzz, PHt, H, zb, vb, R, angle, True, xo, Po, inb, Sb, nb, db, lb, okb)
+        L = np.empty((n, n, B))
+        _chol(Pp, L, okb)
+        HL = np.empty((m, n, B))
+        _bmm(H, L, HL)
+        _update(xp, Pp, zp, Pzz, PHt, L, HL, np.zeros((m, m, B)), zb, vb, R, angle, xo, Po, inb, Sb, nb, db, lb, okb)
         _store(xo, x_out, r0)
         _store(Po, P_out, r0)
         _store(xp, xp_out, r0)
@@ -486,6 +497,9 @@ def _ekf_sequence(x0, P0, zs, valid, F, Q, lam, hk, A, idx, scale, R, angle, kee
         nb, lb = np.empty(B), np.empty(B)
         db = np.empty(B, dtype=np.int64)
         okb = np.ones(B, dtype=np.bool_)
+        L = np.empty((n, n, B))
+        HL = np.empty((m, n, B))
+        D0 = np.zeros((m, m, B))
         ws = _update_workspace(n, m, B)
         for k in range(K):
             for a in range(m):
@@ -504,7 +518,9 @@ def _ekf_sequence(x0, P0, zs, valid, F, Q, lam, hk, A, idx, scale, R, angle, kee
             _jac_block(hk, A, idx, scale, xp, H)
             _bmmT(Pp, H, PHt)
             _bmm(H, PHt, Pzz)
-            _update_ws(xp, Pp, zp, Pzz, PHt, H, zb, vb, R, angle, True, xo, Po, inb, Sb, nb, db, lb, okb, ws)
+            _chol(Pp, L, okb)
+            _bmm(H, L, HL)
+            _update_ws(xp, Pp, zp, Pzz, PHt, L, HL, D0, zb, vb, R, angle, xo, Po, inb, Sb, nb, db, lb, okb, ws)
             for c in range(B):
                 r = r0 + c
                 for i in range(n):
@@ -626,11 +642,37 @@ def _sigma_step(x, P, z, valid, F, Q, lam, hk, A, idx, scale, R, angle, cscale, 
                 for i in range(n):
                     for c in range(B):
                         Pxz[i, a, c] += (chi[s, i, c] - xp[i, c]) * w * dZ[s, a, c]
+        # statistical linearisation, factored (as the NumPy filter): with χ = x⁻ + L ξ and the unit
+        # points ξ = ±cscale e_j, G = Σ wc ξ dZᵀ = L⁻¹ Pxz, and D = Σ wc e eᵀ with e = dZ − Gᵀ ξ
+        off = 1 if centre else 0
+        GT = np.zeros((m, n, B))  # (H L) = Gᵀ
+        for j in range(n):
+            wp = wc[off + j] * cscale
+            wn = wc[off + n + j] * cscale
+            for a in range(m):
+                for c in range(B):
+                    GT[a, j, c] = wp * dZ[off + j, a, c] - wn * dZ[off + n + j, a, c]
+        E = np.empty((npts, m, B))
+        for a in range(m):
+            for c in range(B):
+                if centre:
+                    E[0, a, c] = dZ[0, a, c]
+                for j in range(n):
+                    g = cscale * GT[a, j, c]
+                    E[off + j, a, c] = dZ[off + j, a, c] - g
+                    E[off + n + j, a, c] = dZ[off + n + j, a, c] + g
+        D = np.zeros((m, m, B))
+        for s in range(npts):
+            w = wc[s]
+            for a in range(m):
+                for b in range(m):
+                    for c in range(B):
+                        D[a, b, c] += E[s, a, c] * w * E[s, b, c]
         xo, Po = np.empty((n, B)), np.empty((n, n, B))
         inb, Sb = np.empty((m, B)), np.empty((m, m, B))
         nb, lb = np.empty(B), np.empty(B)
         db = np.empty(B, dtype=np.int64)
-        _update(xp, Pp, zp, Pzz, Pxz, Pzz, zb, vb, R, angle, False, xo, Po, inb, Sb, nb, db, lb, okb)
+        _update(xp, Pp, zp, Pzz, Pxz, L, GT, D, zb, vb, R, angle, xo, Po, inb, Sb, nb, db, lb, okb)
         _store(xo, x_out, r0)
         _store(Po, P_out, r0)
         _store(xp, xp_out, r0)

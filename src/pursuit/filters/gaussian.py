@@ -4,14 +4,22 @@ All four share one predict-fade-update cycle and differ only in how they
 propagate a Gaussian through the motion model and the measurement model:
 
 * KF and EKF linearise (exactly for the KF) and use the Joseph-form update
-  ``P = (I − K H) P⁻ (I − K H)ᵀ + K R Kᵀ``;
+  ``P = (I − K H) P⁻ (I − K H)ᵀ + K R Kᵀ``, its first term computed as
+  ``(A L)(A L)ᵀ`` with ``A = I − K H`` and ``L`` the Cholesky factor of
+  ``P⁻``, so that round-off stays relative to the result even when ``P⁻``
+  is ill-conditioned;
 * UKF and CKF use sigma points and the same Joseph form with the
   statistically linearised ``H = Pxzᵀ P⁻⁻¹`` and the linearisation-error
   covariance ``D = Pzz − H P⁻ Hᵀ`` added to R.  This equals
   ``P⁻ − K S Kᵀ`` exactly in exact arithmetic, but every term is a sum of
   positive-semidefinite products (for non-negative covariance weights), so
   the covariance stays positive definite over millions of steps, where the
-  subtraction loses it after long gaps with precise measurements.
+  subtraction loses it after long gaps with precise measurements.  The
+  first term is computed as ``A_L A_Lᵀ`` with ``A_L = (I − K H) L = L − K Gᵀ``
+  (``L`` the points' Cholesky factor, ``G = L⁻¹ Pxz`` summed from the
+  points), so neither ``L⁻¹`` nor a product with an ill-conditioned ``P⁻``
+  is formed: a last-bit change of the inputs after a long gap cannot turn
+  it indefinite.
 
 Any Gaussian filter can gate outliers: with ``gate=p`` a measurement whose
 NIS exceeds the χ²(dof) quantile ``p`` is not used (that run only predicts)
@@ -60,7 +68,7 @@ from typing import Any
 import numpy as np
 
 from .._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, mv, numerical_jacobian, quad, symmetrize
-from .._validation import in_range, no_infinite_measurement, no_infinite_measurements, nonnegative
+from .._validation import in_range, measurement_for_step, model_dim, no_infinite_measurements, nonnegative, prior_of_size
 from ..compute import fallback_warning, resolve_backend
 from ..gaussian import Gaussian
 from ..rng import RNGLike
@@ -166,9 +174,12 @@ class _Measured:
     zp: np.ndarray  # predicted measurement (*b, m)
     Pzz: np.ndarray  # H P⁻ Hᵀ or its sigma-point analogue, without R
     Pxz: np.ndarray  # P⁻ Hᵀ or the sigma-point cross-covariance
-    H: np.ndarray | None  # linearisation for the Joseph form (statistical for sigma-point filters)
+    H: np.ndarray | None  # linearisation for the Joseph form (KF/EKF; None for sigma-point filters)
     repaired: np.ndarray | None = None
-    D: np.ndarray | None = None  # linearisation-error covariance Pzz − H P⁻ Hᵀ (sigma-point filters)
+    # sigma-point filters: the Joseph form with H = Gᵀ L⁻¹ (statistical linearisation), kept factored
+    D: np.ndarray | None = None  # linearisation-error covariance Pzz − H P⁻ Hᵀ
+    L: np.ndarray | None = None  # Cholesky factor of P⁻ the points were drawn with (χ = x⁻ + L ξ)
+    G: np.ndarray | None = None  # L⁻¹ Pxz = (H L)ᵀ, summed from the points (no solve with L)
 
 
 @dataclass(frozen=True)
@@ -233,6 +244,11 @@ class _GaussianFilter:
         """Whether steps run compiled (``backend="numba"`` with supported models and fading)."""
         return self._specs is not None
 
+    def _measurement_dim(self) -> int:
+        """m: the measurement model's ``dim``, else the size of its noise covariance (a user's model need not say)."""
+        m = model_dim(self.measurement)
+        return np.shape(self.measurement.cov(1))[-1] if m is None else m
+
     # -- public API ---------------------------------------------------------
     def init(self, prior: Gaussian, batch: tuple[int, ...] = (), rng: RNGLike = None) -> GaussianState:
         """Initial state from a Gaussian prior, for a batch of runs.
@@ -245,6 +261,7 @@ class _GaussianFilter:
         batch = tuple(batch)
         if prior.mean.ndim > 1 and not batch:
             batch = prior.mean.shape[:-1]
+        prior_of_size(prior.dim, model_dim(self.motion), self.motion)
         mean, cov = prior.broadcast(batch)
         return GaussianState(mean=mean, cov=cov, k=0, memory=self.fading.init(batch))
 
@@ -267,10 +284,7 @@ class _GaussianFilter:
         """
         k = state.k + 1 if k is None else int(k)
         batch = state.batch
-        z = np.asarray(z, dtype=float)
-        if z.shape[:-1] != batch:
-            z = np.broadcast_to(z, (*batch, z.shape[-1]))
-        no_infinite_measurement(z, k)
+        z = measurement_for_step(z, batch, self._measurement_dim(), k)
         if self._specs is not None and len(batch) <= 1:
             from .._compiled.gaussian import gaussian_step
 
@@ -432,18 +446,27 @@ def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k):
     S_inv = inv_spd(S)
     K = Pxz @ S_inv
     mean = x_pred + mv(K, nu)
-    if H is not None:
+    if meas.L is not None:
+        # Sigma points: the Joseph form through the points' factor, (I − K H) L = L − K Gᵀ, so
+        # neither H = Gᵀ L⁻¹ nor a product with P⁻ is formed.  With L ill-conditioned (a long gap
+        # makes P⁻ nearly singular) the solve for H and the products A P⁻ Aᵀ lost positive
+        # definiteness to round-off; a Gram matrix A_L A_Lᵀ cannot.
+        AL = meas.L - K @ _t(meas.G)
+        cov = AL @ _t(AL) + K @ (R_eff + D) @ _t(K)
+    elif H is not None:
         n = x_pred.shape[-1]
         A = np.eye(n) - K @ H
-        noise = R_eff if D is None else R_eff + D
-        cov = A @ P_pred @ _t(A) + K @ noise @ _t(K)
+        cov = _sandwich(A, P_pred) + K @ R_eff @ _t(K)
     else:
         cov = P_pred - K @ S @ _t(K)
+    measured = dof > 0
+    if (meas.L is not None or H is not None) and not np.all(measured):
+        # nothing measured: the prediction itself, not its factor's reconstruction L Lᵀ
+        cov = np.where(measured[..., None, None], cov, P_pred)
     cov = symmetrize(cov)
 
     nis = quad(nu, S_inv)
     loglik = -0.5 * (nis + logdet_spd(S) + dof * _LOG_2PI)
-    measured = dof > 0
     nis = np.where(measured, nis, np.nan)
     loglik = np.where(measured, loglik, 0.0)
     innovation = np.where(valid, nu_full, np.nan) if not np.all(valid) else nu_full
@@ -455,6 +478,25 @@ def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k):
         "loglik": np.broadcast_to(loglik, batch),
     }
     return mean, cov, info
+
+
+def _sandwich(A: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """A P Aᵀ computed as the Gram matrix (A L)(A L)ᵀ of P's Cholesky factor L.
+
+    The direct product errs by about ε·|A|·|P|·|A|, which exceeds the
+    smallest eigenvalue of the result when P⁻ is ill-conditioned (a long gap,
+    then one precise component: an EKF with range-bearing went indefinite
+    after a 500 s gap when its inputs were scaled by 1 + 1e-15).  The Gram
+    matrix errs relative to its own diagonal instead.  A stack holding a
+    matrix that does not factor takes the direct product (the next step's
+    factorisation repairs and flags it).
+    """
+    try:
+        L = np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        return A @ P @ _t(A)
+    AL = A @ L
+    return AL @ _t(AL)
 
 
 def linear_update(
@@ -629,8 +671,7 @@ class _SigmaPointFilter(_GaussianFilter):
         G = np.einsum("p,pi,...pj->...ij", wc, xi, dZ)
         E = dZ - np.einsum("pi,...ij->...pj", xi, G)
         D = _t(E * wc[:, None]) @ E
-        H = _t(np.linalg.solve(_t(L), G))
-        return _Measured(zp, Pzz, Pxz, H, repaired, D)
+        return _Measured(zp, Pzz, Pxz, None, repaired, D, L, G)
 
     def _linearize(self, pred, k):
         # Statistical linearisation about the unfaded prediction P̄ + Q:
