@@ -7,11 +7,12 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 PYTEST_ARGS ?=
 
-.PHONY: demo test bench clean help
+.PHONY: demo test test-avx2-paths bench clean help
 
 help:
 	@echo "make demo   reproduce every experiment under experiments/ into results/"
 	@echo "make test   run the test suite"
+	@echo "make test-avx2-paths   on an AVX-512 CPU, rerun the compiled, cross-check and robustness tests on NumPy's AVX2 paths"
 	@echo "make bench  run the speed benchmarks (writes docs/benchmarks.md)"
 
 $(BIN)/python:
@@ -30,6 +31,17 @@ demo: $(VENV)/.installed
 
 test: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -n auto $(PYTEST_ARGS)
+
+# On a CPU with AVX-512, NumPy's elementary functions differ from the AVX2 ones in the last bit:
+# run the tests that care a second time on NumPy's AVX2 paths (docs/compiled-backend.md).
+AVX2_PATH_TESTS = tests/compiled tests/filters/test_conformance.py tests/filters/test_robustness.py tests/filters/test_perturbation.py
+
+test-avx2-paths: $(VENV)/.installed-test
+	@if grep -qw avx512f /proc/cpuinfo; then \
+		NPY_DISABLE_CPU_FEATURES="X86_V4" $(BIN)/python -m pytest -n auto $(AVX2_PATH_TESTS); \
+	else \
+		echo "this CPU has no AVX-512: make test already ran NumPy's AVX2 paths"; \
+	fi
 
 BENCH_VENV ?= .bench-venv
 

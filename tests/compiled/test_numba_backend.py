@@ -4,10 +4,25 @@ Skipped when numba is not installed (``make test`` installs it through the
 ``test`` extra).  Agreement is relative 1e-9 (observed: about 1e-13): the
 compiled code draws the same random numbers and follows the same formulas,
 only sums in another order.
+
+What each test can promise (docs/compiled-backend.md, "Limits of the agreement"):
+
+* Filters continuous in their inputs (Kalman family, bootstrap PF) agree to
+  1e-9 on any CPU.
+* The cuckoo-search PFs take greedy accept decisions on fitness values that
+  pass through exp, log, power and arctan2.  The compiled kernels call libm;
+  NumPy's AVX-512 code paths give other last bits, and the search amplifies a
+  last-bit difference into other decisions.  Their 1e-9 agreement therefore
+  holds given the same elementary-function results: those tests run where
+  NumPy's functions give libm's bits (an AVX2 CPU, or
+  ``NPY_DISABLE_CPU_FEATURES=X86_V4``, which ``.ci/run`` sets for a second
+  pass on an AVX-512 machine) and skip elsewhere, while their agreement in
+  distribution over runs is tested on any CPU.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
@@ -29,6 +44,32 @@ from pursuit.scenarios.ungm import UNGM  # noqa: E402
 
 RTOL = 1e-9
 ROOT = Path(__file__).resolve().parents[2]
+
+
+def numpy_elementary_functions_are_libm() -> bool:
+    """Whether NumPy's float64 exp, log, power and arctan2 give the bits of libm's (``math``) here.
+
+    The functions the cuckoo search's decisions depend on; checked on 4000
+    arguments each (the AVX-512 paths differ on about 5 % of them).
+    """
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-30.0, 30.0, 4000)
+    y = rng.uniform(1e-3, 50.0, 4000)
+    cases = [
+        (np.exp, math.exp, (x,)),
+        (np.log, math.log, (y,)),
+        (np.power, math.pow, (y, x / 10.0)),
+        (np.arctan2, math.atan2, (x, y)),
+    ]
+    return all(np.array_equal(f(*args), [g(*v) for v in zip(*args)]) for f, g, args in cases)
+
+
+SAME_ELEMENTARY_FUNCTIONS = pytest.mark.skipif(
+    not numpy_elementary_functions_are_libm(),
+    reason="NumPy's elementary functions differ from libm's in the last bit on this CPU (AVX-512 paths) and the cuckoo "
+    "search's greedy decisions amplify that: this agreement holds given the same results, with NPY_DISABLE_CPU_FEATURES=X86_V4 "
+    "(.ci/run's second pass); agreement in distribution is tested on any CPU",
+)
 
 
 def _close(a, b, what):
@@ -112,6 +153,7 @@ CUCKOO = {
 }
 
 
+@SAME_ELEMENTARY_FUNCTIONS
 @pytest.mark.parametrize("variant", sorted(CUCKOO))
 def test_cuckoo_pf_ungm_agrees(variant):
     sc, sim = _ungm(M=6, T=15)
@@ -127,11 +169,40 @@ CUCKOO_MEASUREMENTS = {
 }
 
 
+@SAME_ELEMENTARY_FUNCTIONS
 @pytest.mark.parametrize("kind", sorted(CUCKOO_MEASUREMENTS))
 def test_cuckoo_pf_cv_agrees_with_missing_data(kind):
     meas = CUCKOO_MEASUREMENTS[kind]
     mot, zs, prior = _cv_data(meas, M=6, T=15)
     _same_tracks(lambda be: CUCKOO["ics"](mot, meas, be), zs, prior, STREAMS)
+
+
+@pytest.mark.parametrize("cls", [pu.CSPF, pu.ICSPF], ids=["cs-pf", "ics-pf"])
+def test_cuckoo_pfs_agree_in_distribution_on_any_cpu(cls):
+    """The two backends' per-run RMSE on UNGM agree in mean over 400 paired runs, whatever the elementary functions.
+
+    Where both backends see the same elementary-function results they agree
+    run by run (the tests above); elsewhere a run's search may take other
+    decisions after some steps, and the paired differences of the runs' RMSE
+    must then average out: |mean| within 4 standard errors.  Its power,
+    measured once by running the compiled ICS-PF with a changed search
+    against NumPy's default one: α fixed at 0.5 gives 6.0 standard errors,
+    Pa held constant 6.9, one iteration fewer 5.1 (all caught); the trend
+    term switched off gives 3.8 (missed).  So this guards against a kernel
+    that searches differently, not against every small slip: the run-by-run
+    tests above, in ``.ci/run``'s second pass on an AVX-512 machine, do that.
+    """
+    M = 400
+    sc = UNGM(steps=40)
+    sim = sc.simulate(run_streams(1, range(M), 0), M)
+    rmse = {}
+    for be in ("numpy", "numba"):
+        track = pu.run(cls(sc.motion, sc.measurement, particles=100, backend=be), sim.measurements, sim.prior, rng=run_streams(7, range(M), 1))
+        assert np.all(np.isfinite(track.mean))
+        rmse[be] = np.sqrt(np.mean((track.mean - sim.truth) ** 2, axis=(0, 2)))
+    d = rmse["numpy"] - rmse["numba"]
+    se = d.std(ddof=1) / np.sqrt(M)
+    assert abs(d.mean()) <= 4.0 * se + 1e-12, f"mean paired RMSE difference {d.mean():.3g} (standard error {se:.3g})"
 
 
 GAUSSIAN = {
@@ -209,7 +280,14 @@ def test_user_models_fall_back_with_a_warning():
         assert pu.UnscentedKalmanFilter(ConstantVelocity(), meas, backend="numba").compiled
 
 
-EXPERIMENTS = ["p1-ungm", "p1-wsn", "p2-toa", "p3-upf", "p4-maneuver", "wsn-gaussian"]
+EXPERIMENTS = [
+    pytest.param("p1-ungm", marks=SAME_ELEMENTARY_FUNCTIONS),  # CS-PF and ICS-PF
+    pytest.param("p1-wsn", marks=SAME_ELEMENTARY_FUNCTIONS),
+    "p2-toa",
+    "p3-upf",
+    "p4-maneuver",
+    "wsn-gaussian",
+]
 
 
 @pytest.mark.slow
