@@ -13,8 +13,11 @@ over runs is innermost around that body, so the compiler vectorises it
 across runs (SIMD lanes) with everything in registers; only the state and
 the outputs touch memory.
 
-The arithmetic is that of the block kernels' Joseph-form update with
-missing components masked (``pursuit.filters.gaussian``'s convention):
+The arithmetic is the Joseph-form update with missing components masked
+(``pursuit.filters.gaussian``'s convention), with the product ``A P⁻ Aᵀ``
+formed directly, not through a Cholesky factor as the NumPy filters and
+the block kernels do (that would add an unrolled factorisation per step;
+the linear cases pass ``tests/filters/test_perturbation.py`` without it):
 ``P⁻ = λ F P Fᵀ + Q``, ``S = H P⁻ Hᵀ + R`` on the measured components (an
 unmeasured one gets ``S_aa = 1`` and no cross terms), ``K = P⁻ Hᵀ S⁻¹``
 with the unmeasured columns zeroed, ``P = (I − K H) P⁻ (I − K H)ᵀ + K R Kᵀ``.
