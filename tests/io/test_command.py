@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import subprocess
 import sys
 import threading
@@ -308,3 +309,43 @@ def test_a_stream_with_nothing_to_track_exits_2(capsys, monkeypatch):
     assert main(["track", "-", "-c", WSN_MODEL]) == 2
     err = capsys.readouterr().err.splitlines()
     assert err[-1] == "pursuit track: error: <stdin>: nothing to track: it held no measurement records"
+
+
+@pytest.mark.parametrize("how", ["same", "symlink", "hardlink"])
+@pytest.mark.parametrize("stream", [False, True])
+def test_an_output_that_is_the_input_is_refused_and_the_input_kept(tmp_path, capsys, how, stream):
+    data = tmp_path / "data.csv"
+    data.write_bytes(Path(WSN_CSV).read_bytes())
+    out = data
+    if how == "symlink":
+        out = tmp_path / "out.csv"
+        out.symlink_to(data)
+    elif how == "hardlink":
+        out = tmp_path / "out.csv"
+        os.link(data, out)
+    argv = ["track", str(data), "-c", WSN_MODEL, "-o", str(out)] + (["--stream"] if stream else [])
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"{out}: the output is the input file {data}; choose another output" in err
+    assert data.read_bytes() == Path(WSN_CSV).read_bytes()
+
+
+def test_stdin_redirected_from_the_output_file_is_refused(tmp_path, capsys, monkeypatch):
+    data = tmp_path / "data.jsonl"
+    data.write_bytes(Path(WSN_JSONL).read_bytes())
+    with open(data, "rb") as fh:
+        monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(fh))
+        assert main(["track", "-", "-c", WSN_MODEL, "-o", str(data)]) == 2
+    assert "the output is the input file <stdin>" in capsys.readouterr().err
+    assert data.read_bytes() == Path(WSN_JSONL).read_bytes()
+
+
+def test_the_batch_output_keeps_the_mode_of_the_file_it_replaces_and_writes_through_a_link(tmp_path, capsys):
+    target = tmp_path / "estimates.csv"
+    target.write_text("old\n")
+    target.chmod(0o640)
+    link = tmp_path / "latest.csv"
+    link.symlink_to(target)
+    assert main(["track", WSN_CSV, "-c", WSN_MODEL, "-o", str(link)]) == 0
+    assert link.is_symlink()
+    assert target.read_text().startswith("time,") and (target.stat().st_mode & 0o777) == 0o640

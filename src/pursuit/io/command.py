@@ -7,7 +7,8 @@ Two modes:
   problem is listed on standard error with its line and field); with
   ``--skip-bad`` the bad records are listed, skipped, and the estimates
   written.  The output file appears whole or not at all (written to a
-  temporary file beside it, then renamed).
+  temporary file beside it, then renamed; :mod:`pursuit.io.output_file`).
+  An output that is the input file (through any link) is refused.
 * **stream** (``-``, standard input, or ``--stream``): records are filtered
   as they arrive and each estimate is written and flushed as soon as its time
   step is complete.  A bad record stops the command with exit code 2 after
@@ -24,11 +25,11 @@ import argparse
 import io
 import os
 import sys
-import tempfile
 from pathlib import Path
 from typing import BinaryIO, TextIO
 
 from .model import TrackModel, load_track_model
+from .output_file import same_file, same_file_as_stream, write_whole
 from .records import FORMATS, BadRecord, read_records
 from .steps import OUT_OF_ORDER, Dropped
 from .tracker import Estimate, stream_records, track_records
@@ -89,6 +90,10 @@ def run_track(args: argparse.Namespace, *, stdin: BinaryIO | None = None, stdout
         return EXIT_BAD_INPUT
     model = load_track_model(args.config)
     source = "<stdin>" if args.data == "-" else args.data
+    if args.output and (same_file(args.data, args.output) if args.data != "-" else same_file_as_stream(stdin, args.output)):
+        # in a stream the output is opened while the input is read: it would truncate the recording
+        print(f"pursuit track: error: {args.output}: the output is the input file {source}; choose another output", file=stderr)
+        return EXIT_BAD_INPUT
     try:
         fh = stdin if args.data == "-" else open(args.data, "rb")
     except OSError as e:
@@ -181,7 +186,7 @@ def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, st
     text = buffer.getvalue()
     if args.output:
         try:
-            _write_atomically(Path(args.output), text)
+            write_whole(args.output, text)
         except OSError as e:
             print(f"pursuit track: error: {args.output}: cannot write: {e.strerror or e}", file=stderr)
             return EXIT_BAD_INPUT
@@ -191,24 +196,6 @@ def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, st
     if result.problems:
         print(f"pursuit track: skipped {len(result.problems)} bad record(s) in {source}", file=stderr)
     return EXIT_OK
-
-
-def _write_atomically(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file renamed into place."""
-    directory = path.parent if str(path.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
 
 
 # --------------------------------------------------------------------------
