@@ -349,3 +349,13 @@ def test_the_batch_output_keeps_the_mode_of_the_file_it_replaces_and_writes_thro
     assert main(["track", WSN_CSV, "-c", WSN_MODEL, "-o", str(link)]) == 0
     assert link.is_symlink()
     assert target.read_text().startswith("time,") and (target.stat().st_mode & 0o777) == 0o640
+
+
+def test_a_stream_cut_off_inside_its_last_record_reports_it_instead_of_reading_a_shorter_number(capsys, monkeypatch):
+    lines = Path(WSN_CSV).read_bytes().splitlines(keepends=True)
+    cut = lines[6].rstrip(b"\n")[:-3]  # the last record, cut inside its value ("41.53" read as "41.5"), no newline
+    assert cut.count(b",") == 2 and cut[-1:].isdigit()  # still a well-formed CSV record
+    _stdin(monkeypatch, b"".join(lines[:6]) + cut)
+    assert main(["track", "-", "-c", WSN_MODEL, "--format", "csv"]) == 2
+    err = capsys.readouterr().err
+    assert "<stdin>:7: record: incomplete: the input ended inside this record" in err

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import math
 
 import pytest
@@ -183,3 +184,28 @@ def test_good_and_predict_only_records_pass_the_check():
 def test_unknown_format_is_refused():
     with pytest.raises(ValueError, match="format"):
         read_records([], "xml")
+
+
+@pytest.mark.parametrize("fmt,good,cut", ids=["csv", "jsonl"], argvalues=[
+    ("csv", b"time,sensor,value\n1.0,A,78.43\n", b"time,sensor,value\n1.0,A,78.43\n2.0,A,7"),
+    ("jsonl", b'{"time": 1.0, "sensor": "A", "value": 78.43}\n', b'{"time": 1.0, "sensor": "A", "value": 78.43}\n{"time": 2.0, "sensor": "A", "value": 7'),
+])
+def test_a_last_line_without_its_newline(fmt, good, cut):
+    def read(data, mode):
+        return list(read_records(io.BytesIO(data), fmt, unterminated=mode))
+
+    assert read(good, "reject") == read(good, "accept")  # complete lines are read alike
+    # a stream: a record is complete only at its newline, so "78.43" cut to "7" is never read as 7
+    *first, last = read(cut, "reject")
+    assert all(isinstance(r, Record) for r in first) and len(first) == 1
+    assert isinstance(last, BadRecord) and last.line == (3 if fmt == "csv" else 2)
+    assert last.field == "record" and last.message.startswith("incomplete: the input ended inside")
+    # a file: a whole record is read; a broken one says the input may have been cut off
+    if fmt == "csv":
+        assert read(cut, "hint")[-1] == Record(3, 2.0, "A", (7.0,))
+        broken = read(b"time,sensor,value\n1.0,A,78.43\n2.0,A", "hint")[-1]
+    else:
+        broken = read(cut, "hint")[-1]
+    assert isinstance(broken, BadRecord) and broken.message.endswith("(the last line has no newline: was the input cut off?)")
+    with pytest.raises(ValueError, match="^unterminated: must be one of"):
+        read(good, "drop")

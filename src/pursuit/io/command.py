@@ -101,7 +101,8 @@ def run_track(args: argparse.Namespace, *, stdin: BinaryIO | None = None, stdout
         return EXIT_BAD_INPUT
     try:
         lines = iter(fh.readline, b"") if streaming else fh
-        records = read_records(lines, in_fmt)
+        # a stream's last line without its newline was cut off mid-write; a file's may just lack one
+        records = read_records(lines, in_fmt, unterminated="reject" if streaming else "hint")
         if streaming:
             return _stream(records, model, args, out_fmt, policy, source, stdout, stderr)
         return _batch(records, model, args, out_fmt, policy, source, stdout, stderr)

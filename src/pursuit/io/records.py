@@ -189,22 +189,46 @@ def _decode(raw: bytes | str, lineno: int) -> str:
     return text
 
 
-def read_csv(lines: Iterable[bytes | str]) -> Iterator[Record | BadRecord]:
+UNTERMINATED = ("accept", "hint", "reject")
+"""What the readers do with a line that has no newline (in a file, only the last can lack one)."""
+
+_CUT_HINT = " (the last line has no newline: was the input cut off?)"
+_CUT_MESSAGE = "incomplete: the input ended inside this record (no newline after it); a record is complete at its newline"
+
+
+def _terminated(raw: bytes | str) -> bool:
+    return raw.endswith(b"\n" if isinstance(raw, bytes) else "\n")
+
+
+def read_csv(lines: Iterable[bytes | str], unterminated: str = "accept") -> Iterator[Record | BadRecord]:
     """Records from CSV lines (bytes or text, newlines included or not).
 
     The first line that is neither blank nor a ``#`` comment must be the
     header ``time,sensor,value`` (or ``values``); an input without one (an
     empty file, or only blank and comment lines) is a bad ``header``.  Never
     raises on bad input: every problem comes out as a :class:`BadRecord`.
+
+    ``unterminated`` says what a line without a newline is (lines read from
+    a file: the last one, when the writer stopped before its newline):
+    ``"accept"`` reads it as any line (for lists of lines without newlines),
+    ``"hint"`` too, but a problem in it says the input may have been cut
+    off, and ``"reject"`` reports it as incomplete (a stream: a record is
+    complete only at its newline, so a half-written ``78.43`` cut to ``7``
+    is never read as 7).
     """
+    if unterminated not in UNTERMINATED:
+        raise ValueError(f"unterminated: must be one of {', '.join(UNTERMINATED)}, got {unterminated!r}")
     header_seen = content_seen = False
     lineno = 0
     for lineno, raw in enumerate(lines, start=1):
+        cut = unterminated != "accept" and not _terminated(raw)
         try:
             text = _decode(raw, lineno)
             if not text.strip() or text.lstrip().startswith("#"):
                 continue
             content_seen = True
+            if cut and unterminated == "reject":
+                raise _Bad("record", _CUT_MESSAGE)
             fields = _split_csv(text)
             if not header_seen:
                 header_seen = True
@@ -215,7 +239,7 @@ def read_csv(lines: Iterable[bytes | str]) -> Iterator[Record | BadRecord]:
             yield _csv_record(lineno, fields)
         except _Bad as e:
             content_seen = True
-            yield BadRecord(lineno, e.field, e.message)
+            yield BadRecord(lineno, e.field, e.message + (_CUT_HINT if cut and unterminated == "hint" else ""))
     if not content_seen:  # nothing but blank and comment lines: no header to read
         what = "the input is empty" if lineno == 0 else "the input has only blank and comment lines"
         yield BadRecord(max(lineno, 1), "header", f"missing: {what} (expected the header 'time,sensor,value')")
@@ -249,17 +273,22 @@ def _reject_constant(name: str) -> float:
     return math.nan if name == "NaN" else (math.inf if name == "Infinity" else -math.inf)
 
 
-def read_jsonl(lines: Iterable[bytes | str]) -> Iterator[Record | BadRecord]:
+def read_jsonl(lines: Iterable[bytes | str], unterminated: str = "accept") -> Iterator[Record | BadRecord]:
     """Records from JSON Lines (one object per line; blank lines ignored).
 
     Never raises on bad input: every problem comes out as a
-    :class:`BadRecord`.
+    :class:`BadRecord`.  ``unterminated`` as in :func:`read_csv`.
     """
+    if unterminated not in UNTERMINATED:
+        raise ValueError(f"unterminated: must be one of {', '.join(UNTERMINATED)}, got {unterminated!r}")
     for lineno, raw in enumerate(lines, start=1):
+        cut = unterminated != "accept" and not _terminated(raw)
         try:
             text = _decode(raw, lineno)
             if not text.strip():
                 continue
+            if cut and unterminated == "reject":
+                raise _Bad("record", _CUT_MESSAGE)
             try:
                 obj = json.loads(text, parse_constant=_reject_constant)
             except json.JSONDecodeError as e:
@@ -268,7 +297,7 @@ def read_jsonl(lines: Iterable[bytes | str]) -> Iterator[Record | BadRecord]:
                 raise _Bad("record", f"not valid JSON ({type(e).__name__})") from None
             yield _json_record(lineno, obj)
         except _Bad as e:
-            yield BadRecord(lineno, e.field, e.message)
+            yield BadRecord(lineno, e.field, e.message + (_CUT_HINT if cut and unterminated == "hint" else ""))
 
 
 def _json_record(lineno: int, obj: Any) -> Record:
@@ -307,12 +336,12 @@ def _json_record(lineno: int, obj: Any) -> Record:
     return Record(lineno, time, sensor, values)
 
 
-def read_records(lines: Iterable[bytes | str], fmt: str) -> Iterator[Record | BadRecord]:
-    """Records in format ``fmt`` (``"csv"`` or ``"jsonl"``)."""
+def read_records(lines: Iterable[bytes | str], fmt: str, unterminated: str = "accept") -> Iterator[Record | BadRecord]:
+    """Records in format ``fmt`` (``"csv"`` or ``"jsonl"``); ``unterminated`` as in :func:`read_csv`."""
     if fmt == "csv":
-        return read_csv(lines)
+        return read_csv(lines, unterminated)
     if fmt == "jsonl":
-        return read_jsonl(lines)
+        return read_jsonl(lines, unterminated)
     raise ValueError(f"format: must be one of {', '.join(FORMATS)}, got {fmt!r}")
 
 
