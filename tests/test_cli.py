@@ -146,3 +146,18 @@ def test_impossible_sweep_run_is_refused_at_load(tmp_path):
     p.write_text(SMALL.replace("[figures]\n", "[figures]\nrun = -1\n"))
     with pytest.raises(ConfigError, match=r"figures.run: must be a non-negative integer"):
         load_experiment(p)
+
+
+def test_version_bare_command_and_python_dash_m(capsys):
+    import pursuit
+
+    for flag in ("--version", "-V"):
+        with pytest.raises(SystemExit) as e:
+            main([flag])
+        assert e.value.code == 0
+        assert capsys.readouterr().out.strip() == f"pursuit {pursuit.__version__}"
+    assert main([]) == 0  # a bare `pursuit` lists the commands instead of complaining
+    out = capsys.readouterr().out
+    assert out.startswith("usage: pursuit") and all(c in out for c in ("list", "run", "reproduce", "report", "track"))
+    done = subprocess.run([sys.executable, "-m", "pursuit", "--version"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and done.stdout.strip() == f"pursuit {pursuit.__version__}"

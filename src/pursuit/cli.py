@@ -9,6 +9,9 @@
 ``run`` and ``reproduce`` take ``--workers N`` (local processes) or
 ``--scheduler tcp://HOST:PORT`` (a Dask cluster) to spread the chunks of runs.
 
+``pursuit`` alone prints this list of commands; ``pursuit --version`` the
+version; ``python -m pursuit`` is the same command.
+
 Exit codes: 0 success, 2 bad input (config, arguments), 1 unexpected failure.
 """
 
@@ -29,8 +32,11 @@ EXIT_BAD_INPUT = 2
 
 
 def _parser() -> argparse.ArgumentParser:
+    from . import __version__
+
     p = argparse.ArgumentParser(prog="pursuit", description="Tracking and positioning filters, compared fairly.")
-    sub = p.add_subparsers(dest="command", required=True)
+    p.add_argument("-V", "--version", action="version", version=f"pursuit {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
     ls = sub.add_parser("list", help="list models, filters, scenarios, fading strategies and experiments")
     ls.add_argument("kind", nargs="?", choices=["models", "filters", "scenarios", "fading", "experiments"], help="only this kind")
@@ -86,7 +92,11 @@ def _add_engine_arguments(sp: argparse.ArgumentParser) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.command is None:  # a bare `pursuit`: what it can do, not an argparse complaint
+        parser.print_help()
+        return 0
     args.argv = argv
     if getattr(args, "compute_backend", None):
         from .compute import set_default_backend
