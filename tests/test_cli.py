@@ -161,3 +161,14 @@ def test_version_bare_command_and_python_dash_m(capsys):
     assert out.startswith("usage: pursuit") and all(c in out for c in ("list", "run", "reproduce", "report", "track"))
     done = subprocess.run([sys.executable, "-m", "pursuit", "--version"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0 and done.stdout.strip() == f"pursuit {pursuit.__version__}"
+
+
+def test_a_track_model_given_to_run_and_an_experiment_given_to_track_say_which_command_they_belong_to(capsys):
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    model, experiment = root / "examples" / "wsn-range.toml", root / "experiments" / "p2-toa.toml"
+    assert main(["run", str(model)]) == 2
+    assert f"this is a `pursuit track` model file, not an experiment: run it as pursuit track DATA --config {model}" in capsys.readouterr().err
+    assert main(["track", str(root / "examples" / "data" / "wsn-range.csv"), "-c", str(experiment)]) == 2
+    assert f"this is an experiment file, not a `pursuit track` model file: run it as pursuit run {experiment}" in capsys.readouterr().err

@@ -217,6 +217,8 @@ def load_experiment(path: str | Path) -> Experiment:
     """
     path = Path(path)
     text, doc = read_toml(path)
+    if "experiment" not in doc and {"motion", "sensors"} <= set(doc):
+        raise ConfigError(path, f"this is a `pursuit track` model file, not an experiment: run it as pursuit track DATA --config {path}")
     try:
         exp = _build(doc, path)
         check = getattr(exp.plan, "check_runs", None)

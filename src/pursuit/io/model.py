@@ -36,7 +36,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from .. import registry
-from ..experiment import config_error, read_toml
+from ..experiment import ConfigError, config_error, read_toml
 from ..gaussian import Gaussian
 from ..models.measurement import LinearGaussian, RangeSensors, TimeOfArrival
 from ..models.motion import ConstantAcceleration, ConstantVelocity
@@ -240,6 +240,8 @@ def load_track_model(path: str | Path) -> TrackModel:
     """
     path = Path(path)
     text, doc = read_toml(path)
+    if "experiment" in doc and "motion" not in doc:
+        raise ConfigError(path, f"this is an experiment file, not a `pursuit track` model file: run it as pursuit run {path}")
     try:
         return build_track_model(doc, name=path.stem, path=path)
     except ValueError as e:
