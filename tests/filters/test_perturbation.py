@@ -33,14 +33,12 @@ import numpy as np
 import pytest
 
 import pursuit as pu
-from pursuit.models import ConstantVelocity, LinearGaussian, RangeBearing, RangeSensors, TimeOfArrival
 
-from .test_robustness import ANCHORS, ARRAY, MANEUVER_FILTERS, _orbit, long_maneuver_scenario
+from .test_robustness import MANEUVER_FILTERS, long_maneuver_scenario, scenario_with_truth
 
 EPS = 1e-15
 RUNS, STEPS = 20, 300
 HARD_STEPS = 1000  # the gaps scenario runs longer: more lost tracks and long gaps to recover from
-BEARING_SENSOR = np.array([-20.0, -30.0])
 TRACKING = 5.0  # m: a run "tracks" while its position error stays below this (a lost one is 10 m to 1e5 m off)
 CONSISTENT = 100.0  # ... and its position NEES below this (chi-square, 2 dof: exceeded with probability 2e-22)
 CLOSE = 1e-5  # m: how far a last-bit perturbation may move a tracking filter's position
@@ -64,32 +62,7 @@ CASES = [(f, s) for f in FILTERS for s in SENSORS if f != "kf" or s == "position
 
 def scenario(sensor: str, gaps: bool, runs: int = RUNS, steps: int = STEPS, seed: int = 2):
     """Motion, measurement, measurements ``(K, M, m)``, steps ``(K,)``, prior and true positions ``(K, M, 2)``."""
-    rng = np.random.default_rng(seed)
-    levels = np.exp(np.linspace(np.log(0.01), np.log(10.0), 64))
-    dts = levels[rng.integers(0, 64, steps)]
-    if gaps:
-        dts[rng.random(steps) < 5e-3] = 500.0
-    t = np.cumsum(dts)
-    pos = _orbit(t[:, None] + rng.uniform(0, 1000, runs)[None, :])
-    if sensor == "position":
-        meas = LinearGaussian.position(4, (0, 2), 1e-3)
-        z = pos + 1e-3 * rng.standard_normal(pos.shape)
-    elif sensor == "range":
-        meas = RangeSensors(ANCHORS, 1e-3)
-        z = np.linalg.norm(pos[..., None, :] - ANCHORS, axis=-1) + 1e-3 * rng.standard_normal((steps, runs, 4))
-    elif sensor == "toa":
-        meas = TimeOfArrival(ARRAY, 1e-6)
-        z = np.linalg.norm(pos[..., None, :] - ARRAY, axis=-1) / 1500.0 + 1e-6 * rng.standard_normal((steps, runs, 3))
-    else:
-        meas = RangeBearing(BEARING_SENSOR, 1e-3, 1e-4)
-        d = pos - BEARING_SENSOR
-        z = np.stack([np.hypot(d[..., 0], d[..., 1]), np.arctan2(d[..., 1], d[..., 0])], axis=-1)
-        z = z + rng.standard_normal((steps, runs, 2)) * [1e-3, 1e-4]
-    z[rng.random(z.shape) < 0.2] = np.nan
-    x0 = np.zeros((runs, 4))
-    x0[:, 0], x0[:, 2] = pos[0, :, 0], pos[0, :, 1]
-    prior = pu.Gaussian(x0, np.diag([100.0, 1.0, 100.0, 1.0]))
-    return ConstantVelocity(ndim=2, q=1e-4), meas, z, dts, prior, pos
+    return scenario_with_truth(sensor, runs, steps, seed, gap_rate=5e-3 if gaps else 0.0)
 
 
 def perturbed_batch(z, prior):

@@ -42,11 +42,12 @@ import pytest
 import pursuit as pu
 from pursuit._linalg import inv_spd, symmetrize
 from pursuit.filters import AdaptiveCSFilter, CurrentStatisticalFilter, InteractingMultipleModel, ModifiedSingerFilter
-from pursuit.models import ConstantVelocity, LinearGaussian, RangeSensors, Singer, TimeOfArrival
+from pursuit.models import ConstantVelocity, LinearGaussian, RangeBearing, RangeSensors, Singer, TimeOfArrival
 
 RUNS, STEPS = 200, 5000  # 10^6 filter steps per filter
 ANCHORS = np.array([[0.0, 0.0], [100.0, 0.0], [0.0, 100.0], [100.0, 100.0]])
 ARRAY = np.array([[0.0, 0.0], [0.0, 50.0], [50.0, 0.0]])
+BEARING_SENSOR = np.array([-20.0, -30.0])
 
 
 def _orbit(t):
@@ -56,6 +57,11 @@ def _orbit(t):
 
 def long_scenario(sensor: str, runs: int = RUNS, steps: int = STEPS, seed: int = 1, gap_rate: float = 1e-3):
     """Models, measurements ``(K, M, m)``, time steps ``(K,)`` and prior of the hard scenario."""
+    return scenario_with_truth(sensor, runs, steps, seed, gap_rate)[:5]
+
+
+def scenario_with_truth(sensor: str, runs: int = RUNS, steps: int = STEPS, seed: int = 1, gap_rate: float = 1e-3):
+    """:func:`long_scenario` and the true positions ``(K, M, 2)``; ``sensor`` also ``"range-bearing"`` (from BEARING_SENSOR)."""
     rng = np.random.default_rng(seed)
     # 64 distinct irregular steps (so the motion model's matrix cache works) plus rare long gaps
     levels = np.exp(np.linspace(np.log(0.01), np.log(10.0), 64))
@@ -69,14 +75,19 @@ def long_scenario(sensor: str, runs: int = RUNS, steps: int = STEPS, seed: int =
     elif sensor == "range":
         meas = RangeSensors(ANCHORS, 1e-3)
         z = np.linalg.norm(pos[..., None, :] - ANCHORS, axis=-1) + 1e-3 * rng.standard_normal((steps, runs, 4))
-    else:
+    elif sensor == "toa":
         meas = TimeOfArrival(ARRAY, 1e-6)
         z = np.linalg.norm(pos[..., None, :] - ARRAY, axis=-1) / 1500.0 + 1e-6 * rng.standard_normal((steps, runs, 3))
+    else:
+        meas = RangeBearing(BEARING_SENSOR, 1e-3, 1e-4)
+        d = pos - BEARING_SENSOR
+        z = np.stack([np.hypot(d[..., 0], d[..., 1]), np.arctan2(d[..., 1], d[..., 0])], axis=-1)
+        z = z + rng.standard_normal((steps, runs, 2)) * [1e-3, 1e-4]
     z[rng.random(z.shape) < 0.2] = np.nan
     x0 = np.zeros((runs, 4))
     x0[:, 0], x0[:, 2] = pos[0, :, 0], pos[0, :, 1]
     prior = pu.Gaussian(x0, np.diag([100.0, 1.0, 100.0, 1.0]))
-    return ConstantVelocity(ndim=2, q=1e-4), meas, z, dts, prior
+    return ConstantVelocity(ndim=2, q=1e-4), meas, z, dts, prior, pos
 
 
 def _run_and_check(filt, z, dts, prior):
