@@ -209,3 +209,18 @@ def test_a_last_line_without_its_newline(fmt, good, cut):
     assert isinstance(broken, BadRecord) and broken.message.endswith("(the last line has no newline: was the input cut off?)")
     with pytest.raises(ValueError, match="^unterminated: must be one of"):
         read(good, "drop")
+
+
+@pytest.mark.parametrize("value", ["４１.5", "41.５", "٤١.5", "1e٣"])
+def test_unicode_digits_are_not_numbers(value):
+    (rec,) = read_csv([b"time,sensor,value\n", f"1.0,A,{value}\n".encode()])
+    assert isinstance(rec, BadRecord) and rec.field == "value" and rec.message.startswith("not a number")
+    (rec,) = read_csv([b"time,sensor,value\n", f"{value},A,1.0\n".encode()])
+    assert isinstance(rec, BadRecord) and rec.field == "time"
+
+
+def test_a_key_given_twice_in_a_json_record_is_bad():
+    (rec,) = read_jsonl([b'{"time": 1.0, "sensor": "A", "value": 2.0, "value": 3.0}\n'])
+    assert rec == BadRecord(1, "value", "given twice in one record")
+    (ok,) = read_jsonl([b'{"time": 1.0, "sensor": "A", "value": 2.0}\n'])
+    assert ok == Record(1, 1.0, "A", (2.0,))

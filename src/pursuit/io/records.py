@@ -39,7 +39,8 @@ __all__ = [
 
 FORMATS = ("csv", "jsonl")
 
-_NUMBER = re.compile(r"^[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?$")
+# ASCII digits only: Python's float() also reads full-width and other Unicode digits ("４１.5")
+_NUMBER = re.compile(r"^[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?$")
 _NAN = {"nan", "+nan", "-nan"}
 _CSV_HEADERS = (("time", "sensor", "value"), ("time", "sensor", "values"))
 _INF = {"inf", "infinity"}
@@ -273,6 +274,17 @@ def _reject_constant(name: str) -> float:
     return math.nan if name == "NaN" else (math.inf if name == "Infinity" else -math.inf)
 
 
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    # json keeps the last of repeated keys silently; a record that says two things is bad
+    obj: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in obj:
+            name = key.encode("unicode_escape").decode("ascii")[:40] or "''"
+            raise _Bad(name, "given twice in one record")
+        obj[key] = value
+    return obj
+
+
 def read_jsonl(lines: Iterable[bytes | str], unterminated: str = "accept") -> Iterator[Record | BadRecord]:
     """Records from JSON Lines (one object per line; blank lines ignored).
 
@@ -290,7 +302,7 @@ def read_jsonl(lines: Iterable[bytes | str], unterminated: str = "accept") -> It
             if cut and unterminated == "reject":
                 raise _Bad("record", _CUT_MESSAGE)
             try:
-                obj = json.loads(text, parse_constant=_reject_constant)
+                obj = json.loads(text, parse_constant=_reject_constant, object_pairs_hook=_unique_keys)
             except json.JSONDecodeError as e:
                 raise _Bad("record", f"not valid JSON ({e.msg} at column {e.colno})") from None
             except (ValueError, RecursionError) as e:  # huge integers, absurd nesting
