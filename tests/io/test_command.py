@@ -359,3 +359,17 @@ def test_a_stream_cut_off_inside_its_last_record_reports_it_instead_of_reading_a
     assert main(["track", "-", "-c", WSN_MODEL, "--format", "csv"]) == 2
     err = capsys.readouterr().err
     assert "<stdin>:7: record: incomplete: the input ended inside this record" in err
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full")
+@pytest.mark.parametrize("stream", [False, True])
+@pytest.mark.parametrize("to_stdout", [False, True])
+def test_an_output_that_cannot_be_written_is_one_line_and_exit_2(stream, to_stdout):
+    # a subprocess, so that standard output really is /dev/full
+    argv = [sys.executable, "-m", "pursuit", "track", WSN_CSV, "-c", WSN_MODEL] + (["--stream"] if stream else [])
+    with open("/dev/full", "w") as full:
+        done = subprocess.run(argv + ([] if to_stdout else ["-o", "/dev/full"]), stdout=full if to_stdout else None,
+                              stderr=subprocess.PIPE, text=True, timeout=120)
+    where = "standard output" if to_stdout else "/dev/full"
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [f"pursuit track: error: {where}: cannot write: No space left on device"]

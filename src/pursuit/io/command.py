@@ -112,12 +112,49 @@ def run_track(args: argparse.Namespace, *, stdin: BinaryIO | None = None, stdout
         # does not complain.
         _silence(stdout)
         return EXIT_OK
+    except _OutputFailed as e:  # the output itself failed (a full disk, `> /dev/full`): one line, no traceback
+        where = args.output or "standard output"
+        print(f"pursuit track: error: {where}: cannot write: {e.error.strerror or e.error}", file=stderr)
+        if not args.output:
+            _silence(stdout)  # else the interpreter's final flush fails again
+        return EXIT_BAD_INPUT
     except KeyboardInterrupt:  # the usual way to end a live stream: no traceback
         print("pursuit track: interrupted", file=stderr)
         return EXIT_INTERRUPTED
     finally:
         if fh is not stdin:
             fh.close()
+
+
+class _OutputFailed(Exception):
+    """Writing the estimates failed (an OSError of the output, not of the input)."""
+
+    def __init__(self, error: OSError) -> None:
+        super().__init__(str(error))
+        self.error = error
+
+
+class _GuardedOutput:
+    """A text stream whose write and flush errors become :class:`_OutputFailed` (a broken pipe stays itself)."""
+
+    def __init__(self, stream: TextIO) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            raise
+        except OSError as e:
+            raise _OutputFailed(e) from None
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            raise
+        except OSError as e:
+            raise _OutputFailed(e) from None
 
 
 def _silence(stream: TextIO) -> None:
@@ -192,8 +229,9 @@ def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, st
             print(f"pursuit track: error: {args.output}: cannot write: {e.strerror or e}", file=stderr)
             return EXIT_BAD_INPUT
     else:
-        stdout.write(text)
-        stdout.flush()
+        guarded = _GuardedOutput(stdout)
+        guarded.write(text)
+        guarded.flush()
     if result.problems:
         print(f"pursuit track: skipped {len(result.problems)} bad record(s) in {source}", file=stderr)
     return EXIT_OK
@@ -213,9 +251,10 @@ def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, s
         out = stdout
     written = skipped = 0
     try:
-        writer = make_writer(out_fmt, out, model.state_labels, flush_each=True)
+        guarded = _GuardedOutput(out)
+        writer = make_writer(out_fmt, guarded, model.state_labels, flush_each=True)
         writer.start()
-        out.flush()
+        guarded.flush()
         for event in stream_records(records, model, out_of_order=policy, stop_at_bad=not args.skip_bad):
             if isinstance(event, Estimate):
                 writer.write(event)
@@ -237,7 +276,11 @@ def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, s
                 return EXIT_BAD_INPUT
     finally:
         if out is not stdout:
-            out.close()
+            try:
+                out.close()  # flushes what is buffered: it can fail too
+            except OSError as e:
+                if sys.exc_info()[1] is None:  # not already failing for another reason
+                    raise _OutputFailed(e) from None
     if skipped:
         print(f"pursuit track: skipped {skipped} bad record(s) in {source}", file=stderr)
     if not written:  # the output holds only its header, written when the stream began
