@@ -44,3 +44,17 @@ def test_a_prior_of_the_wrong_size_names_the_model_and_both_sizes():
     prior_of_size(3, None, object())  # a user's model that declares no dim
     with pytest.raises(ValueError, match=r"^prior: expected 4 state components for the ConstantVelocity motion model .*got 3$"):
         prior_of_size(3, 4, ConstantVelocity())
+
+
+@pytest.mark.parametrize("dt", [-1.0, 0.0, float("nan"), float("inf"), True, "1"])
+def test_a_time_step_that_is_not_a_positive_finite_number_names_the_step(dt):
+    from pursuit._validation import time_step
+
+    with pytest.raises(ValueError, match=r"^step 4: dt: "):
+        time_step(dt, 4)
+
+
+def test_a_positive_time_step_passes_and_none_means_the_models_own():
+    from pursuit._validation import time_step
+
+    assert time_step(None, 1) is None and time_step(2, 1) == 2.0 and time_step(np.float32(0.5), 1) == 0.5

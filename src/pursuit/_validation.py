@@ -25,6 +25,7 @@ __all__ = [
     "model_dim",
     "measurement_for_step",
     "prior_of_size",
+    "time_step",
 ]
 
 
@@ -193,3 +194,19 @@ def prior_of_size(prior_dim: int, n: int | None, model) -> None:
             f"prior: expected {n} state components for the {type(model).__name__} motion model (mean shape (*batch, {n}), "
             f"cov (*batch, {n}, {n})), got {prior_dim}"
         )
+
+
+def time_step(dt, k: int) -> float | None:
+    """A step's ``dt`` checked: ``None`` (the model's own) or a finite number of seconds > 0.
+
+    A negative, zero, NaN or infinite ``dt`` raises ``ValueError`` naming
+    step ``k`` (a NaN used to surface as "covariance is not symmetric").
+    """
+    if dt is None:
+        return None
+    if isinstance(dt, bool) or not isinstance(dt, (int, float, np.integer, np.floating)):
+        raise ValueError(f"step {k}: dt: expected a number of seconds, got {dt!r}")
+    v = float(dt)
+    if not (np.isfinite(v) and v > 0):
+        raise ValueError(f"step {k}: dt: must be a finite time step > 0 s, got {dt!r}")
+    return v

@@ -72,3 +72,12 @@ def test_the_cs_filter_names_its_axes():
     state = cs.init(pu.Gaussian(np.zeros(6), np.eye(6)), (5,))
     with pytest.raises(ValueError, match=r"^step 1: z: expected shape \(5, 2\) \(m = 2 components per measurement\), got \(5, 3\)$"):
         cs.step(state, np.zeros((5, 3)))
+
+
+@pytest.mark.parametrize("dt", [-1.0, 0.0, float("nan")])
+@pytest.mark.parametrize("name", sorted(FILTERS))
+def test_step_refuses_a_time_step_that_is_not_positive_and_finite(name, dt):
+    filt, m = FILTERS[name]
+    state = filt.init(PRIOR, (5,), rng=1)
+    with pytest.raises(ValueError, match=r"^step 1: dt: must be a finite time step > 0 s"):
+        filt.step(state, np.zeros((5, m)), dt=dt)

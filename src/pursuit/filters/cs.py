@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from .._chi2 import chi2_isf
-from .._validation import in_range, measurement_for_step, nonnegative, positive
+from .._validation import in_range, measurement_for_step, nonnegative, positive, time_step
 from ..gaussian import Gaussian
 from ..models.maneuver import (
     CS_VARIANCE_FACTOR,
@@ -244,6 +244,7 @@ class _AxisFilter:
     ) -> tuple[AxisState, dict[str, np.ndarray]]:
         """One predict-update cycle on every axis with measurement ``z`` (``(*b, A)``; NaN = missing)."""
         k = state.k + 1 if k is None else int(k)
+        dt = time_step(dt, k)
         T = float(self.dt if dt is None else dt)
         batch = state.batch
         z = measurement_for_step(z, batch, self.axes, k)

@@ -69,7 +69,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .._validation import in_range, nonnegative, positive
+from .._validation import in_range, nonnegative, positive, time_step
 from ..rng import RunStreams
 from .particle import (
     ParticleFilterBase,
@@ -427,6 +427,7 @@ class CuckooParticleFilter(ParticleFilterBase):
     ) -> tuple[ParticleState, dict[str, np.ndarray]]:
         """Propagate, run the cuckoo search, weigh and estimate."""
         k = state.k + 1 if k is None else int(k)
+        dt = time_step(dt, k)
         z = _prepare_measurement(z, state.batch, k, self.measurement)
         if self._compiled_batch(state):
             from .._compiled.particle import cuckoo_step

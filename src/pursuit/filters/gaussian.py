@@ -68,7 +68,7 @@ from typing import Any
 import numpy as np
 
 from .._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, mv, numerical_jacobian, quad, symmetrize
-from .._validation import in_range, measurement_for_step, model_dim, no_infinite_measurements, nonnegative, prior_of_size
+from .._validation import in_range, measurement_for_step, model_dim, no_infinite_measurements, nonnegative, prior_of_size, time_step
 from ..compute import fallback_warning, resolve_backend
 from ..gaussian import Gaussian
 from ..rng import RNGLike
@@ -283,6 +283,7 @@ class _GaussianFilter:
             the motion model's own ``dt``).
         """
         k = state.k + 1 if k is None else int(k)
+        dt = time_step(dt, k)
         batch = state.batch
         z = measurement_for_step(z, batch, self._measurement_dim(), k)
         if self._specs is not None and len(batch) <= 1:

@@ -52,7 +52,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .._linalg import inv_spd, logdet_spd, quad, symmetrize
-from .._validation import in_range
+from .._validation import in_range, time_step
 from ..gaussian import Gaussian
 from ..rng import RNGLike
 from .gating import chi2_gate_thresholds
@@ -294,6 +294,7 @@ class InteractingMultipleModel:
     ) -> tuple[IMMState, dict[str, np.ndarray]]:
         """One IMM cycle: mix, run every mode, update μ, combine."""
         k = state.k + 1 if k is None else int(k)
+        dt = time_step(dt, k)
         batch = state.batch
         Pi = self.transition
         mu = state.probs

@@ -66,7 +66,7 @@ from typing import Any
 import numpy as np
 
 from .._linalg import inv_spd, quad, symmetrize
-from .._validation import in_range, measurement_for_step, model_dim, no_infinite_measurements, positive_int, prior_of_size
+from .._validation import in_range, measurement_for_step, model_dim, no_infinite_measurements, positive_int, prior_of_size, time_step
 from ..compute import fallback_warning, resolve_backend
 from ..gaussian import Gaussian
 from ..models.measurement import _GaussianNoise, gaussian_loglik
@@ -686,6 +686,7 @@ class BootstrapParticleFilter(ParticleFilterBase):
             Time since the previous step (default: the motion model's).
         """
         k = state.k + 1 if k is None else int(k)
+        dt = time_step(dt, k)
         z = _prepare_measurement(z, state.batch, k, self.measurement)
         if self._compiled_batch(state):
             from .._compiled.particle import bootstrap_step

@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from .._linalg import cholesky_psd, mv
-from .._validation import in_range, nonnegative
+from .._validation import in_range, nonnegative, time_step
 from ..rng import RNGLike
 from .gaussian import GaussianState, UnscentedKalmanFilter, motion_jacobian
 from .particle import ParticleFilterBase, ParticleState, _prepare_measurement, _propagate, weighted_moments
@@ -215,6 +215,7 @@ class PartialUPF(ParticleFilterBase):
     ) -> tuple[ParticleState, dict[str, np.ndarray]]:
         """Select, propose (UKF or prior), weigh, estimate and maybe resample."""
         k = state.k + 1 if k is None else int(k)
+        dt = time_step(dt, k)
         batch = state.batch
         z = _prepare_measurement(z, batch, k, self.measurement)
         rng = state.rng
