@@ -454,14 +454,12 @@ def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k):
         # definiteness to round-off; a Gram matrix A_L A_Lᵀ cannot.
         AL = meas.L - K @ _t(meas.G)
         cov = AL @ _t(AL) + K @ (R_eff + D) @ _t(K)
-    elif H is not None:
+    else:  # KF/EKF: every _Measured carries H or the points' factor L
         n = x_pred.shape[-1]
         A = np.eye(n) - K @ H
         cov = _sandwich(A, P_pred) + K @ R_eff @ _t(K)
-    else:
-        cov = P_pred - K @ S @ _t(K)
     measured = dof > 0
-    if (meas.L is not None or H is not None) and not np.all(measured):
+    if not np.all(measured):
         # nothing measured: the prediction itself, not its factor's reconstruction L Lᵀ
         cov = np.where(measured[..., None, None], cov, P_pred)
     cov = symmetrize(cov)
