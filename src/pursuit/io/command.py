@@ -102,7 +102,7 @@ def run_track(args: argparse.Namespace, *, stdin: BinaryIO | None = None, stdout
     try:
         lines = iter(fh.readline, b"") if streaming else fh
         # a stream's last line without its newline was cut off mid-write; a file's may just lack one
-        records = read_records(lines, in_fmt, unterminated="reject" if streaming else "hint")
+        records = read_records(lines, in_fmt, unterminated="reject" if streaming else "hint", layout=model.input)
         if streaming:
             return _stream(records, model, args, out_fmt, policy, source, stdout, stderr)
         return _batch(records, model, args, out_fmt, policy, source, stdout, stderr)
@@ -189,6 +189,20 @@ def _settings(args) -> tuple[str, str, bool, str]:
     return in_fmt, out_fmt, streaming, policy
 
 
+def _header_failed(stderr: TextIO, source: str, items: list, after: str = "") -> bool:
+    """Report the problems of an input whose CSV header is missing or does not fit; True if it is one.
+
+    Fatal even with --skip-bad: the reader stops at such a header, as every
+    row would be misread.
+    """
+    if not any(isinstance(item, BadRecord) and item.field == "header" for item in items):
+        return False
+    for item in items:
+        _report(stderr, source, item, "error")
+    print(f"pursuit track: error: {source}: no usable header, so no record was read{after}", file=stderr)
+    return True
+
+
 def _report(stderr: TextIO, source: str, item: BadRecord | Dropped, kind: str) -> None:
     field = "time" if isinstance(item, Dropped) else item.field
     print(f"pursuit track: {kind}: {source}:{item.line}: {field}: {item.message}", file=stderr)
@@ -199,6 +213,8 @@ def _report(stderr: TextIO, source: str, item: BadRecord | Dropped, kind: str) -
 # --------------------------------------------------------------------------
 def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, stderr) -> int:
     result = track_records(records, model, out_of_order=policy)
+    if _header_failed(stderr, source, result.problems, "; nothing written"):
+        return EXIT_BAD_INPUT
     for item in result.dropped:
         _report(stderr, source, item, "warning")
     kind = "skipped" if args.skip_bad else "error"
@@ -262,6 +278,8 @@ def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, s
             elif isinstance(event, Dropped):
                 _report(stderr, source, event, "warning")
                 stderr.flush()
+            elif _header_failed(stderr, source, [event]):
+                return EXIT_BAD_INPUT
             elif args.skip_bad:
                 _report(stderr, source, event, "skipped")
                 stderr.flush()

@@ -22,6 +22,8 @@ A model file names everything a filter needs to run on recorded data::
     type = "ekf"
     gate = 0.999
 
+    [input]                   # optional: CSV columns, ISO time origin, max_gap (pursuit.io.input_spec)
+
 Loading checks the whole file and reports the first problem as one line that
 names the file, the line and the field (:class:`pursuit.experiment.ConfigError`).
 """
@@ -42,6 +44,7 @@ from ..models.measurement import LinearGaussian, RangeSensors, TimeOfArrival
 from ..models.motion import ConstantAcceleration, ConstantVelocity
 from ..models.sensors import BearingSensors, stack
 from ..registry import REQUIRED, Component, Param
+from .input_spec import InputSpec, build_input_spec
 
 __all__ = ["Sensor", "TrackModel", "load_track_model", "build_track_model", "SENSOR_TYPES", "DEFAULT_VALID"]
 
@@ -50,7 +53,7 @@ DEFAULT_VALID = (-1.0e9, 1.0e9)
 """Accepted measurement values unless a sensor sets ``valid``: anything
 outside is a bad record (it would only overflow the filter)."""
 
-_SECTIONS = ("motion", "sensors", "prior", "filter", "track")
+_SECTIONS = ("motion", "sensors", "prior", "filter", "track", "input")
 _SENSOR_ID = re.compile(r"^[^\s,\"#][^,\"\r\n]*(?<!\s)$")
 
 
@@ -111,6 +114,9 @@ class TrackModel:
         Seed for filters that draw random numbers (particle filters).
     path
         The file it came from.
+    input
+        How to read the data (columns, ISO time origin) and the largest
+        believable time gap (``[input]``, :mod:`pursuit.io.input_spec`).
     """
 
     name: str
@@ -126,6 +132,7 @@ class TrackModel:
     filter: Any
     seed: int
     path: Path | None = None
+    input: InputSpec = InputSpec()
 
     @property
     def measurement_dim(self) -> int:
@@ -287,6 +294,7 @@ def build_track_model(doc: Mapping[str, Any], name: str = "track", path: Path | 
         filter=filt,
         seed=track["seed"],
         path=path,
+        input=build_input_spec(doc.get("input", {}), motion, sensors),
     )
 
 

@@ -223,7 +223,13 @@ def stream_records(
     tracker = Tracker(model)
     policy = "error" if out_of_order == "sort" else out_of_order
     steps = assemble_steps(
-        items, model.sensors, model.measurement_dim, after=model.prior_time, policy=policy, stop_at_bad=stop_at_bad
+        items,
+        model.sensors,
+        model.measurement_dim,
+        after=model.prior_time,
+        policy=policy,
+        stop_at_bad=stop_at_bad,
+        max_gap=model.input.max_gap,
     )
     for event in steps:
         if isinstance(event, Step):
