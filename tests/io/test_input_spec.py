@@ -37,6 +37,26 @@ def test_the_default_max_gap_is_where_the_process_noise_spreads_a_position_over_
     assert np.sqrt(np.diagonal(motion.cov(dt=gap * (1 - 1e-5)))[pos]).max() <= POSITION_SCALE
 
 
+def test_maneuvering_motion_models_get_the_same_rule():
+    from pursuit.models.maneuver import CoordinatedTurn, Singer
+
+    for motion in (Singer(alpha=0.1, sigma=1.0, ndim=2), CoordinatedTurn()):
+        gap = default_max_gap(motion)
+        pos = list(motion.position_indices)
+        assert math.isfinite(gap)
+        assert np.sqrt(np.diagonal(motion.cov(dt=gap))[pos]).max() > POSITION_SCALE
+        assert np.sqrt(np.diagonal(motion.cov(dt=gap * (1 - 1e-5)))[pos]).max() <= POSITION_SCALE
+
+
+def test_a_motion_model_without_a_process_noise_covariance_gets_no_limit():
+    class NoQ:
+        dt = 1.0
+        position_indices = (0,)
+
+    assert default_max_gap(NoQ()) == math.inf
+    assert default_max_gap(ConstantVelocity(ndim=1, dt=1.0, q=0.0 + 1e-300)) < math.inf
+
+
 def test_the_default_max_gap_of_the_wsn_example_by_hand():
     # discrete white-noise acceleration: Q_xx = q dt^4 / 4, so dt = (4 * 1e18 / q) ** (1/4)
     assert default_max_gap(CV) == pytest.approx((4e18 / 0.01) ** 0.25, rel=2e-6)

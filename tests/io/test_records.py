@@ -5,9 +5,11 @@ from __future__ import annotations
 import io
 import json
 import math
-from datetime import datetime, timezone
+from datetime import datetime, timedelta, timezone
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pursuit.io import BadRecord, Record, check_record, read_csv, read_jsonl, read_records
 from pursuit.io.input_spec import InputSpec
@@ -381,3 +383,17 @@ def test_mixing_numeric_and_iso_times_is_a_bad_record_naming_the_line(fmt):
     )
     out = list(read_records(lines(1.0, "2026-07-01T00:00:00Z"), fmt))
     assert out[2].message.startswith(f"an ISO 8601 date-time, but the times of this input are numbers of seconds (since line {first})")
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.datetimes(
+        min_value=datetime(1, 1, 2), max_value=datetime(9999, 12, 30),
+        timezones=st.sampled_from([None, timezone.utc, timezone(timedelta(hours=5, minutes=30)), timezone(-timedelta(hours=11))]),
+    )
+)
+def test_any_iso_time_python_writes_is_read_as_its_seconds_after_the_epoch(when):
+    text = when.isoformat()
+    expected = (when if when.tzinfo else when.replace(tzinfo=timezone.utc)) - datetime(1970, 1, 1, tzinfo=timezone.utc)
+    (rec,) = read_csv([b"time,sensor,value\n", f"{text},A,1\n".encode()])
+    assert rec == Record(2, expected.total_seconds(), "A", (1.0,))

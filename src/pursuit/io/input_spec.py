@@ -130,9 +130,15 @@ def default_max_gap(motion: Any, scale: float = POSITION_SCALE) -> float:
 
     The smallest ``g`` (to a relative 10⁻⁶) with ``sqrt(Q(g)[i, i]) > scale``
     for a position index ``i``, found by bisection on ``log g``; ``inf`` when
-    no gap up to 10³⁰⁰ s does (a model whose noise stays bounded).
+    no gap up to 10³⁰⁰ s does (a model whose noise stays bounded), and for a
+    motion model without ``cov(dt=...)``, ``position_indices`` and ``dt``
+    (nothing to derive the rule from).
     """
-    idx = list(motion.position_indices)
+    try:
+        idx = list(motion.position_indices)
+        np.diagonal(np.asarray(motion.cov(dt=float(motion.dt)), dtype=float))[idx]
+    except (AttributeError, TypeError, ValueError, IndexError):
+        return math.inf
 
     def too_wide(gap: float) -> bool:
         try:
