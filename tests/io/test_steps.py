@@ -85,3 +85,14 @@ def test_a_late_record_is_still_late_and_a_rejected_time_is_not_reached(policy):
     # a time rejected as too far is never reached: an earlier record after it is not late
     out = _steps([5.0, 1.0], policy=policy, max_gap=2.0)
     assert [type(e) for e in out] == [BadRecord, Step] and out[1].time == 1.0
+
+
+def test_each_sensor_of_a_wide_row_is_checked_on_its_own():
+    sensors = {"A": Sensor("A", "range", 1, 0, (0.0, 100.0)), "gps": Sensor("gps", "position", 2, 1, (-1e9, 1e9))}
+    layout = InputSpec(columns={"gps": ("east", "north"), "A": ("r",)})
+    rows = [b"time,east,north,r\n", b"1.0,3.0,4.0,-5.0\n", b"2.0,3.5,4.5,6.0\n"]
+    out = list(assemble_steps(read_csv(rows, layout=layout), sensors, 3, after=0.0))
+    assert [(e.line, e.field) for e in out if isinstance(e, BadRecord)] == [(2, "value")]  # the range only
+    steps = [e for e in out if isinstance(e, Step)]
+    assert [(s.time, s.sensors, s.lines) for s in steps] == [(1.0, ("gps",), (2,)), (2.0, ("gps", "A"), (3,))]
+    np.testing.assert_array_equal(steps[1].z, [6.0, 3.5, 4.5])
