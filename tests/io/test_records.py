@@ -397,3 +397,21 @@ def test_any_iso_time_python_writes_is_read_as_its_seconds_after_the_epoch(when)
     expected = (when if when.tzinfo else when.replace(tzinfo=timezone.utc)) - datetime(1970, 1, 1, tzinfo=timezone.utc)
     (rec,) = read_csv([b"time,sensor,value\n", f"{text},A,1\n".encode()])
     assert rec == Record(2, expected.total_seconds(), "A", (1.0,))
+
+
+iso_like = st.from_regex(r"\A[0-9]{4}-[0-9]{2}-[0-9]{2}([T ][0-9]{2}(:[0-9]{2}(:[0-9]{2}([.,][0-9]{1,9})?)?)?(Z|[+-][0-9]{2}(:?[0-9]{2})?)?)?\Z")
+cell = st.one_of(iso_like, st.sampled_from(["", "nan", "1.5", "-3", "1e999", "x"]), st.text(max_size=6))
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.lists(cell, min_size=1, max_size=6), max_size=12), st.booleans())
+def test_iso_like_times_and_wide_rows_never_raise(rows, wide):
+    text = "t,east,north,r\n" if wide else "time,sensor,value\n"
+    text += "".join(",".join(c.replace('"', "").replace("\n", "").replace("\r", "") for c in row) + "\n" for row in rows)
+    layout = WIDE if wide else None
+    for r in read_csv(text.encode().splitlines(keepends=True), layout=layout):
+        assert isinstance(r, (Record, BadRecord))
+        if isinstance(r, Record):
+            assert math.isfinite(r.time)
+        else:
+            assert r.field and "\n" not in r.message
