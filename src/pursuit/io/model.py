@@ -13,8 +13,8 @@ A model file names everything a filter needs to run on recorded data::
     position = [0.0, 0.0]
     sigma = 1.0
 
-    [prior]
-    mean = [10.0, 0.5, 40.0, 0.8]
+    [prior]                   # optional: without it (or with from = "measurements")
+    mean = [10.0, 0.5, 40.0, 0.8]   # the first positions start the track (pursuit.io.initiate)
     cov = [4.0, 0.25, 4.0, 0.25]
     time = 0.0                # optional: the time the prior refers to
 
@@ -42,6 +42,7 @@ from ..models.measurement import LinearGaussian, RangeSensors, TimeOfArrival
 from ..models.motion import ConstantAcceleration, ConstantVelocity
 from ..models.sensors import BearingSensors, stack
 from ..registry import REQUIRED, Component, Param
+from .initiate import INITIATION_PARAMS, Initiation
 
 __all__ = ["Sensor", "TrackModel", "load_track_model", "build_track_model", "SENSOR_TYPES", "DEFAULT_VALID"]
 
@@ -70,6 +71,10 @@ class Sensor:
         Where its block starts in the filter's measurement vector.
     valid
         ``(low, high)``: values outside are bad records.
+    position
+        Where the sensor is (range, toa, bearing), else None.
+    c
+        Signal speed (toa), else None.
     """
 
     id: str
@@ -77,6 +82,8 @@ class Sensor:
     dim: int
     start: int
     valid: tuple[float, float]
+    position: tuple[float, ...] | None = None
+    c: float | None = None
 
     @property
     def block(self) -> slice:
@@ -95,7 +102,8 @@ class TrackModel:
     motion, measurement
         The models the filter uses; ``measurement`` stacks every sensor.
     prior
-        Gaussian prior on the state.
+        Gaussian prior on the state, or None when it is to be built from
+        the first measurements (``initiation``).
     prior_time
         Time the prior refers to, or None: then the first step is taken to
         come ``dt`` after the prior.
@@ -111,12 +119,16 @@ class TrackModel:
         Seed for filters that draw random numbers (particle filters).
     path
         The file it came from.
+    initiation
+        With no ``[prior]`` or ``[prior] from = "measurements"``: how the
+        prior is built from the first measurements
+        (:mod:`pursuit.io.initiate`); else None.
     """
 
     name: str
     motion: Any
     measurement: Any
-    prior: Gaussian
+    prior: Gaussian | None
     prior_time: float | None
     dt: float
     sensors: Mapping[str, Sensor]
@@ -126,6 +138,7 @@ class TrackModel:
     filter: Any
     seed: int
     path: Path | None = None
+    initiation: Initiation | None = None
 
     @property
     def measurement_dim(self) -> int:
@@ -140,7 +153,7 @@ class _ScenarioView:
     name: str
     motion: Any
     measurement: Any
-    prior: Gaussian
+    prior: Gaussian | None
     dt: float
     state_labels: tuple[str, ...]
     position_indices: tuple[int, ...]
@@ -253,15 +266,14 @@ def build_track_model(doc: Mapping[str, Any], name: str = "track", path: Path | 
     for key in doc:
         if key not in _SECTIONS:
             raise ValueError(f"{key}: unknown section (known: {', '.join(_SECTIONS)})")
-    for key in ("motion", "sensors", "prior", "filter"):
+    for key in ("motion", "sensors", "filter"):
         if key not in doc:
             raise ValueError(f"{key}: required section is missing")
     track = _resolve(doc.get("track", {}), "track", TRACK_PARAMS)
     motion, labels = _build_motion(_resolve(doc["motion"], "motion", MOTION_PARAMS))
     n = motion.dim
     sensors, measurement = _build_sensors(doc["sensors"], motion)
-    prior_vals = _resolve(doc["prior"], "prior", PRIOR_PARAMS)
-    prior = _build_prior(prior_vals, n)
+    prior, prior_time, initiation = _prior_section(doc.get("prior"), n)
     view = _ScenarioView(
         name=track["name"] or name,
         motion=motion,
@@ -278,7 +290,7 @@ def build_track_model(doc: Mapping[str, Any], name: str = "track", path: Path | 
         motion=motion,
         measurement=measurement,
         prior=prior,
-        prior_time=prior_vals["time"],
+        prior_time=prior_time,
         dt=motion.dt,
         sensors=sensors,
         state_labels=labels,
@@ -287,6 +299,7 @@ def build_track_model(doc: Mapping[str, Any], name: str = "track", path: Path | 
         filter=filt,
         seed=track["seed"],
         path=path,
+        initiation=initiation,
     )
 
 
@@ -297,6 +310,17 @@ def _build_motion(vals: dict[str, Any]):
     per_axis = ("{a}", "v{a}") if vals["type"] == "cv" else ("{a}", "v{a}", "a{a}")
     labels = tuple(p.format(a=a) for a in axes for p in per_axis)
     return motion, labels
+
+
+def _prior_section(table: Any, n: int) -> tuple[Gaussian | None, float | None, Initiation | None]:
+    """``[prior]`` with mean and cov, or (absent, or ``from = "measurements"``) an initiation rule."""
+    if table is None:
+        return None, None, Initiation()
+    if isinstance(table, dict) and "from" in table:
+        vals = _resolve(table, "prior", INITIATION_PARAMS)
+        return None, None, Initiation(vals["velocity_sigma"], vals["acceleration_sigma"])
+    vals = _resolve(table, "prior", PRIOR_PARAMS)
+    return _build_prior(vals, n), vals["time"], None
 
 
 def _build_prior(vals: dict[str, Any], n: int) -> Gaussian:
@@ -379,7 +403,8 @@ def _build_sensors(entries: Any, motion: Any) -> tuple[dict[str, Sensor], Any]:
         for v in members:
             dim = ndim if kind == "position" else 1
             valid = DEFAULT_VALID if v["valid"] is None else v["valid"]
-            sensors[v["id"]] = Sensor(v["id"], kind, dim, start, valid)
+            where_at = None if v["position"] is None else tuple(float(a) for a in v["position"])
+            sensors[v["id"]] = Sensor(v["id"], kind, dim, start, valid, where_at, c if kind == "toa" else None)
             start += dim
     ordered = {v["id"]: sensors[v["id"]] for v, _ in specs}
     return ordered, stack(parts)
