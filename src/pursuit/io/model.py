@@ -2,7 +2,7 @@
 
 A model file names everything a filter needs to run on recorded data::
 
-    [motion]                  # cv or ca, with its parameters
+    [motion]                  # cv, ca, ct or singer, with its parameters; or [imm] (io.motions)
     type = "cv"
     ndim = 2
     q = 0.01
@@ -29,7 +29,7 @@ names the file, the line and the field (:class:`pursuit.experiment.ConfigError`)
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -39,10 +39,10 @@ from .. import registry
 from ..experiment import ConfigError, config_error, read_toml
 from ..gaussian import Gaussian
 from ..models.measurement import LinearGaussian, RangeSensors, TimeOfArrival
-from ..models.motion import ConstantAcceleration, ConstantVelocity
 from ..models.sensors import BearingSensors, stack
 from ..registry import REQUIRED, Component, Param
 from .initiate import INITIATION_PARAMS, Initiation
+from .motions import IMM_FILTERS, MOTION_EXTRA_PARAMS, MOTION_TYPES, build_imm, build_motion, imm_motions
 
 __all__ = ["Sensor", "TrackModel", "load_track_model", "build_track_model", "SENSOR_TYPES", "DEFAULT_VALID"]
 
@@ -51,7 +51,7 @@ DEFAULT_VALID = (-1.0e9, 1.0e9)
 """Accepted measurement values unless a sensor sets ``valid``: anything
 outside is a bad record (it would only overflow the filter)."""
 
-_SECTIONS = ("motion", "sensors", "prior", "filter", "track")
+_SECTIONS = ("motion", "imm", "sensors", "prior", "filter", "track")
 _SENSOR_ID = re.compile(r"^[^\s,\"#][^,\"\r\n]*(?<!\s)$")
 
 
@@ -204,11 +204,12 @@ def _sensor_id(field: str, v: str) -> str:
 
 
 MOTION_PARAMS = (
-    Param("type", "str", REQUIRED, "motion model", choices=("cv", "ca")),
+    Param("type", "str", REQUIRED, "motion model", choices=MOTION_TYPES),
     Param("ndim", "int", 2, "spatial axes (1, 2 or 3)", check=_one_to_three),
-    Param("q", "float", REQUIRED, "acceleration (cv) or jerk (ca) noise intensity", check=_positive),
+    Param("q", "float", None, "acceleration (cv, ct) or jerk (ca) noise intensity", check=_positive),
     Param("noise", "str", "discrete", "white-noise model", choices=("discrete", "continuous")),
     Param("dt", "float", 1.0, "nominal interval, s: the first step's dt when [prior] has no time", check=_positive),
+    *MOTION_EXTRA_PARAMS,
 )
 
 SENSOR_PARAMS = (
@@ -266,11 +267,17 @@ def build_track_model(doc: Mapping[str, Any], name: str = "track", path: Path | 
     for key in doc:
         if key not in _SECTIONS:
             raise ValueError(f"{key}: unknown section (known: {', '.join(_SECTIONS)})")
-    for key in ("motion", "sensors", "filter"):
+    if "motion" in doc and "imm" in doc:
+        raise ValueError("imm: give either [motion] (one model) or [imm] (several), not both")
+    for key in ("motion" if "imm" not in doc else "imm", "sensors", "filter"):
         if key not in doc:
             raise ValueError(f"{key}: required section is missing")
     track = _resolve(doc.get("track", {}), "track", TRACK_PARAMS)
-    motion, labels = _build_motion(_resolve(doc["motion"], "motion", MOTION_PARAMS))
+    if "imm" in doc:
+        imm_vals, modes, motion, labels = imm_motions(doc["imm"])
+    else:
+        vals = _resolve(doc["motion"], "motion", MOTION_PARAMS)
+        motion, labels = build_motion(vals, "motion", vals["ndim"], vals["dt"])
     n = motion.dim
     sensors, measurement = _build_sensors(doc["sensors"], motion)
     prior, prior_time, initiation = _prior_section(doc.get("prior"), n)
@@ -284,7 +291,7 @@ def build_track_model(doc: Mapping[str, Any], name: str = "track", path: Path | 
         position_indices=motion.position_indices,
         velocity_indices=motion.velocity_indices,
     )
-    filt = _build_filter(doc["filter"], view)
+    filt = _build_filter(doc["filter"], view) if "imm" not in doc else _imm_filter(doc["filter"], view, imm_vals, modes, doc["sensors"])
     return TrackModel(
         name=view.name,
         motion=motion,
@@ -301,15 +308,6 @@ def build_track_model(doc: Mapping[str, Any], name: str = "track", path: Path | 
         path=path,
         initiation=initiation,
     )
-
-
-def _build_motion(vals: dict[str, Any]):
-    cls = ConstantVelocity if vals["type"] == "cv" else ConstantAcceleration
-    motion = cls(ndim=vals["ndim"], dt=vals["dt"], q=vals["q"], noise=vals["noise"])
-    axes = "xyz"[: vals["ndim"]]
-    per_axis = ("{a}", "v{a}") if vals["type"] == "cv" else ("{a}", "v{a}", "a{a}")
-    labels = tuple(p.format(a=a) for a in axes for p in per_axis)
-    return motion, labels
 
 
 def _prior_section(table: Any, n: int) -> tuple[Gaussian | None, float | None, Initiation | None]:
@@ -424,3 +422,24 @@ def _build_filter(table: Any, view: _ScenarioView) -> Any:
     except (AttributeError, TypeError) as e:  # a builder that wants more than a track model gives
         raise ValueError(f"filter.type: {kind!r} cannot run on a track model ({e})") from None
 
+
+
+def _imm_filter(table: Any, view: _ScenarioView, imm_vals: dict[str, Any], modes: list[Any], sensors: Any) -> Any:
+    """``[imm]``: the ``[filter]`` type runs each mode (with the sensors read in its state); its gate and name go to the IMM."""
+    if not isinstance(table, dict):
+        raise ValueError("filter: expected a table")
+    values = dict(table)
+    kind = values.get("type")
+    if kind not in IMM_FILTERS:
+        raise ValueError(f"filter.type: with [imm] the filter runs each mode, so it must be one of {', '.join(IMM_FILTERS)}; got {kind!r}")
+    gate = values.pop("gate", None)
+    if gate is not None and (isinstance(gate, bool) or not isinstance(gate, (int, float)) or not 0.0 < gate < 1.0):
+        raise ValueError(f"filter.gate: a chi-square gate probability must lie in (0, 1), got {gate!r}")
+    name = values.pop("name", "")
+    types = [m["type"] for m in imm_vals["modes"]]
+
+    def mode(motion: Any, i: int) -> Any:
+        measurement = view.measurement if motion is view.motion else _build_sensors(sensors, motion)[1]
+        return _build_filter({**values, "name": f"{kind.upper()} {types[i]}"}, replace(view, motion=motion, measurement=measurement))
+
+    return build_imm(imm_vals, modes, view.motion, mode, gate, name)
