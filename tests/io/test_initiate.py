@@ -141,3 +141,48 @@ def test_an_input_that_never_fixes_a_position_is_nothing_to_track(tmp_path, caps
     assert main(["track", str(data), "-c", str(model_path)]) == 2
     err = capsys.readouterr().err
     assert "fixes no position" in err and "nothing to track" in err
+
+
+def test_a_live_stream_starts_from_its_first_fixes_and_scores_against_truth(tmp_path, monkeypatch, capsys):
+    import json
+    import sys
+
+    model_path = tmp_path / "gps.toml"
+    model_path.write_text(GPS)
+    truth = tmp_path / "truth.csv"
+    truth.write_text("time,x,y\n1.0,10.0,20.0\n2.0,12.0,18.0\n3.0,14.0,16.0\n")
+    lines = [{"time": 1.0, "sensor": "gps", "value": [10.5, 19.0]}, {"time": 2.0, "sensor": "gps", "value": [12.0, 18.5]},
+             {"time": 3.0, "sensor": "gps", "value": [13.5, 16.0]}]
+    data = "".join(json.dumps(obj) + "\n" for obj in lines).encode()
+    monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BytesIO(data)))
+    assert main(["track", "-", "-c", str(model_path), "--truth", str(truth)]) == 0
+    captured = capsys.readouterr()
+    out = [json.loads(line) for line in captured.out.splitlines()]
+    assert [o["flags"] for o in out] == [["init"], ["init"], []]
+    assert out[1]["state"] == {"x": 12.0, "vx": 1.5, "y": 18.5, "vy": -0.5}
+    assert "3 of 3 estimates have a truth row" in captured.err and "RMSE: position" in captured.err
+
+
+@pytest.mark.parametrize("r", [0.0, -3.0])
+def test_a_step_that_gives_no_usable_position_is_not_used(tmp_path, r):
+    text = GPS.replace(
+        'id = "gps"\ntype = "position"\nsigma = [2.0, 3.0]',
+        'id = "r"\ntype = "range"\nposition = [5.0, 5.0]\nsigma = 1.0\n\n[[sensors]]\nid = "b"\ntype = "bearing"\nposition = [5.0, 5.0]\nsigma = 0.01',
+    ).replace('"kf"', '"ekf"')
+    model = _model(tmp_path, text)
+    rows = [(1.0, "r", r), (1.0, "b", 0.3), (2.0, "r", 50.0), (2.0, "b", 0.3), (3.0, "r", 51.0), (3.0, "b", 0.3)]
+    result = _track(model, rows)
+    if r == 0.0:  # the cross-range variance (r σθ)² is 0: no positive definite covariance
+        assert [d.line for d in result.dropped] == [2, 3]
+        assert "no position with a positive definite covariance" in result.dropped[0].message
+        assert [e.time for e in result.estimates] == [2.0, 3.0]
+    else:  # a negative range is still a point (behind the site): the standard conversion takes it
+        assert [e.time for e in result.estimates] == [1.0, 2.0, 3.0]
+
+
+def test_fixes_too_close_in_time_for_two_point_differencing(tmp_path):
+    model = _model(tmp_path, GPS)
+    rows = [(1e-300, "gps", 10.0, 20.0), (2e-300, "gps", 14.0, 16.0), (3.0, "gps", 14.0, 16.0)]
+    result = _track(model, rows)
+    assert [e.time for e in result.estimates] == [1e-300, 3.0]
+    assert "two-point differencing from time 1e-300 fails" in result.dropped[0].message

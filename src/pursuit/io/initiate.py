@@ -33,6 +33,7 @@ from typing import Any, Generator, Iterable
 
 import numpy as np
 
+from ..gaussian import Gaussian
 from ..initiation import ACCELERATION_SIGMA, VELOCITY_SIGMA, multilaterate, one_point, polar_to_cartesian, two_point
 from ..registry import Param
 from .steps import Dropped, Step
@@ -80,8 +81,25 @@ def position_from_step(step: Step, model: Any) -> tuple[np.ndarray, np.ndarray]:
     ------
     NoFix
         When the step has no position fix, too few ranges and no
-        range-bearing pair.
+        range-bearing pair, or its measurements give no finite position
+        with a positive definite covariance (a range of 0 at the bearing's
+        site, ranges no position agrees with).
     """
+    try:
+        with np.errstate(all="ignore"):  # a failed solution is detected below, not warned about
+            p, C = _position(step, model)
+    except np.linalg.LinAlgError:
+        raise NoFix("its measurements give no position with a positive definite covariance") from None
+    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(C))):
+        raise NoFix("its measurements give no finite position")
+    try:
+        Gaussian(p, C)  # the same check the prior will get
+    except ValueError:
+        raise NoFix("its measurements give no position with a positive definite covariance") from None
+    return p, C
+
+
+def _position(step: Step, model: Any) -> tuple[np.ndarray, np.ndarray]:
     d = len(model.position_indices)
     R = np.asarray(model.measurement.cov(None), dtype=float)
     fixes, ranges, bearings = [], [], []
@@ -155,7 +173,13 @@ def initiate(steps: Iterable[Any], model: Any, estimate: Any) -> Generator[Any, 
             yield estimate(event, g, ("init",))
             continue
         t1, p1, C1 = first
-        prior = two_point(p1, C1, p, C, event.time - t1, model.motion, init.acceleration_sigma)
+        try:
+            with np.errstate(all="ignore"):
+                prior = two_point(p1, C1, p, C, event.time - t1, model.motion, init.acceleration_sigma)
+        except ValueError as e:  # dt so small that (p2 - p1)/dt or C/dt² overflows
+            for line in event.lines:
+                yield Dropped(line, f"not used to start the track: two-point differencing from time {t1!r} fails ({e})")
+            continue
         yield estimate(event, prior, ("init",))
         return replace(model, prior=prior, prior_time=event.time)
     return None
