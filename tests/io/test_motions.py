@@ -150,3 +150,12 @@ def test_an_imm_with_a_turn_mode_follows_a_turn_a_cv_filter_loses(tmp_path):
     imm, cv = turn_rmse(imm_text), turn_rmse(cv_text)
     print(f"position RMSE in the turn: IMM {imm:.2f} m, CV {cv:.2f} m")
     assert imm < 0.5 * cv, (imm, cv)
+
+
+def test_pursuit_run_on_an_imm_model_says_it_is_a_track_model(tmp_path, capsys):
+    from pursuit.cli import main
+
+    path = tmp_path / "imm.toml"
+    path.write_text(IMM + SENSORS + '\n[filter]\ntype = "kf"\n')
+    assert main(["run", str(path)]) == 2
+    assert "this is a `pursuit track` model file, not an experiment" in capsys.readouterr().err

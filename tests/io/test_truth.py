@@ -132,3 +132,14 @@ def test_a_truth_file_at_other_times_is_an_error_after_the_estimates(tmp_path, c
     captured = capsys.readouterr()
     assert captured.out.startswith("time,x,vx")
     assert "time: no truth row at the time of any of the 59 estimates" in captured.err
+
+
+def test_estimates_are_kept_only_when_truth_or_plot_asks_for_them():
+    from argparse import Namespace
+
+    from pursuit.io import load_track_model
+    from pursuit.io.extras import Extras
+
+    model = load_track_model(WSN_MODEL)
+    assert Extras.prepare(Namespace(truth=None, plot=None), model).sink is None  # a live stream keeps nothing
+    assert Extras.prepare(Namespace(truth=WSN_TRUTH, plot=None), model).sink == []

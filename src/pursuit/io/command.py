@@ -112,9 +112,9 @@ def run_track(args: argparse.Namespace, *, stdin: BinaryIO | None = None, stdout
         # a stream's last line without its newline was cut off mid-write; a file's may just lack one
         records = extras.watch(read_records(lines, in_fmt, unterminated="reject" if streaming else "hint"))
         if streaming:
-            code = _stream(records, model, args, out_fmt, policy, source, stdout, stderr, extras.estimates)
+            code = _stream(records, model, args, out_fmt, policy, source, stdout, stderr, extras.sink)
         else:
-            code = _batch(records, model, args, out_fmt, policy, source, stdout, stderr, extras.estimates)
+            code = _batch(records, model, args, out_fmt, policy, source, stdout, stderr, extras.sink)
         return extras.finish(stderr) if code == EXIT_OK else code
     except BrokenPipeError:
         # The reader of our output went away (``| head``): stop quietly, and point
@@ -207,7 +207,7 @@ def _report(stderr: TextIO, source: str, item: BadRecord | Dropped, kind: str) -
 # --------------------------------------------------------------------------
 # batch: all or nothing
 # --------------------------------------------------------------------------
-def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, stderr, collected: list) -> int:
+def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, stderr, collected: list | None) -> int:
     result = track_records(records, model, out_of_order=policy)
     for item in result.dropped:
         _report(stderr, source, item, "warning")
@@ -226,7 +226,8 @@ def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, st
         what = f"all {len(result.problems)} records were bad" if result.problems else "it holds no measurement records"
         print(f"pursuit track: error: {source}: nothing to track: {what}; nothing written", file=stderr)
         return EXIT_BAD_INPUT
-    collected.extend(result.estimates)
+    if collected is not None:
+        collected.extend(result.estimates)
     buffer = io.StringIO()
     writer = make_writer(out_fmt, buffer, model.state_labels)
     writer.start()
@@ -251,7 +252,7 @@ def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, st
 # --------------------------------------------------------------------------
 # stream: estimate by estimate
 # --------------------------------------------------------------------------
-def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, stderr, collected: list) -> int:
+def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, stderr, collected: list | None) -> int:
     if args.output:
         try:
             out = open(args.output, "w", encoding="utf-8", newline="")
@@ -269,7 +270,8 @@ def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, s
         for event in stream_records(records, model, out_of_order=policy, stop_at_bad=not args.skip_bad):
             if isinstance(event, Estimate):
                 writer.write(event)
-                collected.append(event)
+                if collected is not None:  # only for --truth / --plot: a live stream may run for days
+                    collected.append(event)
                 written += 1
             elif isinstance(event, Dropped):
                 _report(stderr, source, event, "warning")

@@ -54,6 +54,11 @@ class Extras:
                 raise ValueError(f"{plot}: --plot draws the x-y plane; this model has {len(model.position_indices)} axis")
         return cls(model, truth, plot)
 
+    @property
+    def sink(self) -> list[Any] | None:
+        """Where the run appends its estimates, or None when neither --truth nor --plot needs them."""
+        return self.estimates if (self.truth is not None or self.plot) else None
+
     def watch(self, records: Iterable[Any]) -> Iterator[Any]:
         """Pass the records on, keeping the position fixes for the plot."""
         if not self.plot:
