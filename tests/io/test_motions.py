@@ -117,6 +117,10 @@ def test_imm_needs_a_filter_that_runs_each_mode(tmp_path):
         _load(tmp_path, IMM + SENSORS + '\n[filter]\ntype = "pf"\n')
     with pytest.raises(ConfigError, match="filter.gate: .* got 2"):
         _load(tmp_path, IMM + SENSORS + '\n[filter]\ntype = "kf"\ngate = 2\n')
+    with pytest.raises(ConfigError, match="filter.name: expected a string, got 3"):
+        _load(tmp_path, IMM + SENSORS + '\n[filter]\ntype = "kf"\nname = 3\n')
+    named = _load(tmp_path, IMM + SENSORS + '\n[filter]\ntype = "ekf"\nname = "mixed"\n')
+    assert named.filter.name == "mixed" and [f.name for f in named.filter.filters] == ["EKF cv", "EKF ct", "EKF ca"]
 
 
 def _turning_target(rng):

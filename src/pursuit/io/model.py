@@ -423,7 +423,6 @@ def _build_filter(table: Any, view: _ScenarioView) -> Any:
         raise ValueError(f"filter.type: {kind!r} cannot run on a track model ({e})") from None
 
 
-
 def _imm_filter(table: Any, view: _ScenarioView, imm_vals: dict[str, Any], modes: list[Any], sensors: Any) -> Any:
     """``[imm]``: the ``[filter]`` type runs each mode (with the sensors read in its state); its gate and name go to the IMM."""
     if not isinstance(table, dict):
@@ -436,6 +435,8 @@ def _imm_filter(table: Any, view: _ScenarioView, imm_vals: dict[str, Any], modes
     if gate is not None and (isinstance(gate, bool) or not isinstance(gate, (int, float)) or not 0.0 < gate < 1.0):
         raise ValueError(f"filter.gate: a chi-square gate probability must lie in (0, 1), got {gate!r}")
     name = values.pop("name", "")
+    if not isinstance(name, str):
+        raise ValueError(f"filter.name: expected a string, got {name!r}")
     types = [m["type"] for m in imm_vals["modes"]]
 
     def mode(motion: Any, i: int) -> Any:
