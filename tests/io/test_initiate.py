@@ -186,3 +186,28 @@ def test_fixes_too_close_in_time_for_two_point_differencing(tmp_path):
     result = _track(model, rows)
     assert [e.time for e in result.estimates] == [1e-300, 3.0]
     assert "two-point differencing from time 1e-300 fails" in result.dropped[0].message
+
+
+def test_the_two_point_prior_from_ranges_is_consistent_over_many_runs():
+    """The prior the track model builds from two range-only steps: NEES of the true state in its χ²(4) band."""
+    from pursuit.initiation import two_point
+    from pursuit.metrics import chi2_bounds, nees
+
+    model = load_track_model(EXAMPLES / "wsn-range.toml")  # four anchors, 1 m range noise
+    anchors = np.array([s.position for s in model.sensors.values()])
+    rng = np.random.default_rng(21)
+    M, dt = 300, 2.0
+    x1 = np.column_stack([rng.uniform(20, 80, M), rng.normal(0, 1, M), rng.uniform(20, 80, M), rng.normal(0, 1, M)])
+    x2 = model.motion.f(x1, dt=dt)  # no process noise between the two steps, as two-point differencing assumes
+    means, covs = [], []
+    for a, b in zip(x1, x2):
+        fixes = []
+        for t, x in ((1.0, a), (1.0 + dt, b)):
+            z = np.linalg.norm(x[[0, 2]] - anchors, axis=1) + rng.normal(0, 1.0, len(anchors))
+            fixes.append(position_from_step(Step(t, z, (1,), tuple(model.sensors)), model))
+        g = two_point(*fixes[0], *fixes[1], dt, model.motion)
+        means.append(g.mean)
+        covs.append(g.cov)
+    e = nees(np.array(means)[None], np.array(covs)[None], x2[None])[0]
+    lo, hi = chi2_bounds(4, M, level=0.999)
+    assert lo < e.mean() < hi, (e.mean(), lo, hi)
