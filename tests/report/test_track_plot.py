@@ -74,3 +74,13 @@ def test_a_bad_plot_name_stops_before_anything_is_written(tmp_path, capsys, name
     assert main(["track", *WSN, "--plot", str(tmp_path / name), "-o", str(out)]) == 2
     assert not out.exists()
     assert message in capsys.readouterr().err
+
+
+def test_a_wide_path_gets_a_wide_figure():
+    K = 50
+    t = np.arange(K, dtype=float)
+    wide = Track(np.stack([10 * t, np.ones(K), t, np.ones(K)], axis=-1), None)
+    square = Track(np.stack([t, np.ones(K), t, np.ones(K)], axis=-1), None)
+    fw, fs = plot_track(wide), plot_track(square)
+    assert fw.get_figwidth() == fs.get_figwidth()
+    assert fw.get_figheight() < 0.6 * fs.get_figheight()

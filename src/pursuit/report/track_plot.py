@@ -119,6 +119,18 @@ def plot_track(
     ax.set_title(title if title is not None else (track.name or "Track"))
     if own_figure:  # below the axes, so that it never hides data
         fig.legend(loc="outside lower center", ncols=3, fontsize=8, frameon=False)
+        _fit_height(fig, ax)
     else:
         ax.legend(fontsize=8)
     return fig
+
+
+def _fit_height(fig: Figure, ax: Any) -> None:
+    """Give a wide or tall path a figure of its shape, not a square with empty bands (equal axes)."""
+    ax.autoscale_view()
+    x0, x1 = ax.get_xlim()
+    y0, y1 = ax.get_ylim()
+    if x1 > x0 and y1 > y0:
+        ratio = float(np.clip((y1 - y0) / (x1 - x0), 0.3, 1.5))
+        width = fig.get_figwidth()
+        fig.set_figheight(0.8 * width * ratio + 1.6)  # axes, plus room for the title and the legend
