@@ -132,7 +132,9 @@ def test_toa_times_become_ranges(tmp_path):
     assert np.all(np.linalg.eigvalsh(C) > 0)
 
 
-def test_an_input_that_never_fixes_a_position_is_nothing_to_track(tmp_path, capsys):
+def test_an_input_that_never_fixes_a_position_is_nothing_to_track(tmp_path, capsys, monkeypatch):
+    import sys
+
     data = tmp_path / "d.csv"
     data.write_text(csv_text([(1.0, "A1", 40.0), (1.0, "A2", 70.0), (2.0, "A1", 41.0)]))
     text = (EXAMPLES / "wsn-range.toml").read_text()
@@ -140,7 +142,16 @@ def test_an_input_that_never_fixes_a_position_is_nothing_to_track(tmp_path, caps
     model_path.write_text(text[: text.index("[prior]")] + text[text.index("[filter]"):])
     assert main(["track", str(data), "-c", str(model_path)]) == 2
     err = capsys.readouterr().err
-    assert "fixes no position" in err and "nothing to track" in err
+    assert "fixes no position" in err
+    assert "nothing to track: no step fixed a position to start the track from (see the warnings; or give a [prior])" in err
+    monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BytesIO(b'{"time": 1.0, "sensor": "A1", "value": 40.0}\n')))
+    assert main(["track", "-", "-c", str(model_path)]) == 2
+    assert "nothing to track: no step fixed a position" in capsys.readouterr().err
+
+
+def test_an_empty_prior_table_says_what_it_needs(tmp_path):
+    with pytest.raises(ConfigError, match='prior: empty: give mean and cov, or from = "measurements"'):
+        _model(tmp_path, GPS + "\n[prior]\n")
 
 
 def test_a_live_stream_starts_from_its_first_fixes_and_scores_against_truth(tmp_path, monkeypatch, capsys):

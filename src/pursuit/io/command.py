@@ -71,6 +71,9 @@ def add_track_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     return tp
 
 
+_NO_START = "no step fixed a position to start the track from (see the warnings; or give a [prior])"
+
+
 class _Usage(Exception):
     """A bad combination of arguments."""
 
@@ -224,6 +227,8 @@ def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, st
         return EXIT_BAD_INPUT
     if not result.estimates:
         what = f"all {len(result.problems)} records were bad" if result.problems else "it holds no measurement records"
+        if model.prior is None and result.dropped and not result.problems:
+            what = _NO_START
         print(f"pursuit track: error: {source}: nothing to track: {what}; nothing written", file=stderr)
         return EXIT_BAD_INPUT
     if collected is not None:
@@ -261,7 +266,7 @@ def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, s
             return EXIT_BAD_INPUT
     else:
         out = stdout
-    written = skipped = 0
+    written = skipped = unused = 0
     try:
         guarded = _GuardedOutput(out)
         writer = make_writer(out_fmt, guarded, model.state_labels, flush_each=True)
@@ -276,6 +281,7 @@ def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, s
             elif isinstance(event, Dropped):
                 _report(stderr, source, event, "warning")
                 stderr.flush()
+                unused += 1
             elif args.skip_bad:
                 _report(stderr, source, event, "skipped")
                 stderr.flush()
@@ -299,6 +305,8 @@ def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, s
         print(f"pursuit track: skipped {skipped} bad record(s) in {source}", file=stderr)
     if not written:  # the output holds only its header, written when the stream began
         what = f"all {skipped} records were bad" if skipped else "it held no measurement records"
+        if model.prior is None and unused and not skipped:
+            what = _NO_START
         print(f"pursuit track: error: {source}: nothing to track: {what}", file=stderr)
         return EXIT_BAD_INPUT
     return EXIT_OK

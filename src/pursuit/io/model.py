@@ -314,6 +314,8 @@ def _prior_section(table: Any, n: int) -> tuple[Gaussian | None, float | None, I
     """``[prior]`` with mean and cov, or (absent, or ``from = "measurements"``) an initiation rule."""
     if table is None:
         return None, None, Initiation()
+    if table == {}:
+        raise ValueError('prior: empty: give mean and cov, or from = "measurements" (or leave [prior] out) to start from the data')
     if isinstance(table, dict) and "from" in table:
         vals = _resolve(table, "prior", INITIATION_PARAMS)
         return None, None, Initiation(vals["velocity_sigma"], vals["acceleration_sigma"])
