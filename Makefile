@@ -7,13 +7,14 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 PYTEST_ARGS ?=
 
-.PHONY: demo test test-avx2-paths bench clean help
+.PHONY: demo test test-avx2-paths bench docs clean help
 
 help:
 	@echo "make demo   reproduce every experiment under experiments/ into results/"
 	@echo "make test   run the test suite"
 	@echo "make test-avx2-paths   on an AVX-512 CPU, rerun the compiled, cross-check and robustness tests on NumPy's AVX2 paths"
 	@echo "make bench  run the speed benchmarks (writes docs/benchmarks.md)"
+	@echo "make docs   build the API reference (Sphinx, warnings are errors) into docs/_build/html"
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +26,16 @@ $(VENV)/.installed: pyproject.toml | $(BIN)/python
 $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	@touch $@ $(VENV)/.installed
+
+$(VENV)/.installed-docs: pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -e '.[docs]'
+	@touch $@ $(VENV)/.installed
+
+# The API reference from the docstrings; -W: a warning (a docstring that does not parse) fails the build.
+# tests/test_api_docs.py runs the same build in `make test`.
+docs: $(VENV)/.installed-docs
+	$(BIN)/python -m sphinx -b html -W --keep-going docs/api docs/_build/html
+	@echo "open docs/_build/html/index.html"
 
 demo: $(VENV)/.installed
 	$(BIN)/pursuit reproduce all --out results
@@ -54,4 +65,4 @@ bench: $(BENCH_VENV)/.installed
 	$(BENCH_VENV)/bin/python benchmarks/run.py
 
 clean:
-	rm -rf $(VENV) results .pytest_cache .hypothesis build dist
+	rm -rf $(VENV) results .pytest_cache .hypothesis build dist docs/_build

@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 
 from .engine.montecarlo import monte_carlo
 from .engine.run import run
+from .examples import examples_dir
 from .filters import (
     CSPF,
     ICSPF,
@@ -63,6 +64,7 @@ def load(folder: str | os.PathLike[str]) -> ExperimentOutput:
 
 
 __all__ = [
+    "examples_dir",
     "Gaussian",
     "RunStreams",
     "Track",

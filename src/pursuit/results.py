@@ -12,6 +12,7 @@ import numpy as np
 
 from . import metrics
 from ._json import json_default
+from ._repr import array_text, html_table, keys_text
 from .reduction import (
     FilterStatistics,
     component_groups,
@@ -54,6 +55,13 @@ class FilterResult:
     covariances: np.ndarray | None
     info: dict[str, np.ndarray] = field(default_factory=dict)
     wall_time: float = 0.0
+
+    def __repr__(self) -> str:
+        # shapes, not values: the arrays hold every run and step
+        return (
+            f"FilterResult({self.name!r}, estimates={array_text(self.estimates)}, "
+            f"covariances={array_text(self.covariances)}, info={keys_text(self.info)}, wall_time={self.wall_time:.3g})"
+        )
 
 
 @dataclass
@@ -98,6 +106,58 @@ class MonteCarloResult:
     def __post_init__(self) -> None:
         if self.truth is None and (self.statistics is None or self.total_runs is None):
             raise ValueError("a summary-mode result needs statistics and total_runs")
+
+    # -- display ------------------------------------------------------------
+    _REPR_FILTERS = 8  # filters listed by repr; the rest are counted
+
+    def __repr__(self) -> str:
+        # A few lines whatever the size: the arrays, statistics and config are described, not printed.
+        lines = [
+            f"MonteCarloResult(scenario={self.scenario!r}, seed={self.seed}, runs={self.runs}, steps={self.steps}, "
+            f"store={self.store!r}" + (f", example_runs={self.examples.runs}," if self.examples is not None else ","),
+            f"  state=[{', '.join(self.state_labels)}],",
+            "  filters={",
+        ]
+        names = self.filter_names
+        for name in names[: self._REPR_FILTERS]:
+            lines.append(f"    {name!r}: {self.filters[name]!r},")
+        if len(names) > self._REPR_FILTERS:
+            lines.append(f"    ... +{len(names) - self._REPR_FILTERS} more")
+        lines.append("  })")
+        return "\n".join(lines)
+
+    def _repr_html_(self) -> str:
+        """The summary table, for notebooks (computes the summary, like :meth:`summary`)."""
+        import html
+
+        rows = self.summary()
+        wanted = ("filter", "rmse_position", "rmse_velocity", "anees", "anis", "wall_time_s")
+        columns = [c for c in wanted if any(c in r for r in rows)]
+        caption = (
+            f"<p><b>MonteCarloResult</b> {html.escape(self.scenario)}: {len(rows)} filters, {self.runs} runs, "
+            f"{self.steps} steps, seed {self.seed}, store {html.escape(self.store)}</p>"
+        )
+        return caption + html_table(columns, rows)
+
+    def to_dataframe(self) -> "pandas.DataFrame":  # noqa: F821 - pandas is optional
+        """:meth:`summary` as a pandas DataFrame, one row per filter, indexed by filter.
+
+        Returns
+        -------
+        pandas.DataFrame
+            The columns of :meth:`summary` (RMSEs, per-component RMS,
+            consistency, wall time, runs).
+
+        Raises
+        ------
+        ImportError
+            If pandas is not installed (``pip install 'pursuit[pandas]'``).
+        """
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError("MonteCarloResult.to_dataframe needs pandas: pip install 'pursuit[pandas]'") from None
+        return pd.DataFrame(self.summary()).set_index("filter")
 
     # -- shape --------------------------------------------------------------
     @property

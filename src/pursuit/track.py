@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._repr import array_text, keys_text
+
 __all__ = ["Track", "SMOOTHER_KEYS"]
 
 SMOOTHER_KEYS = ("pred_mean", "pred_cov", "cross_cov")
@@ -35,6 +37,13 @@ class Track:
     info: dict[str, np.ndarray] = field(default_factory=dict)
     name: str = ""
     wall_time: float = 0.0
+
+    def __repr__(self) -> str:
+        # shapes, not values: a track holds every step of every run
+        return (
+            f"Track({self.name!r}, mean={array_text(self.mean)}, cov={array_text(self.cov)}, "
+            f"info={keys_text(self.info)}, wall_time={self.wall_time:.3g})"
+        )
 
     @property
     def steps(self) -> int:

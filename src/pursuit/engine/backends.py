@@ -40,6 +40,8 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any, Callable, Iterator, Protocol, Sequence
 
+from .main_guard import unguarded_main_call
+
 __all__ = [
     "Backend",
     "Serial",
@@ -50,6 +52,7 @@ __all__ = [
     "current_options",
     "EngineOptions",
     "WorkerLost",
+    "MissingMainGuard",
     "WorkerRestart",
 ]
 
@@ -59,6 +62,10 @@ OnResult = Callable[[Span, Any], None]
 
 class WorkerLost(RuntimeError):
     """Workers kept dying: a chunk could not be computed within the allowed restarts."""
+
+
+class MissingMainGuard(WorkerLost):
+    """The workers died starting because the ``__main__`` script starts them outside its guard."""
 
 
 class WorkerRestart(UserWarning):
@@ -149,6 +156,13 @@ class LocalProcesses:
         How many times the pool may break (a worker killed by the operating
         system, out of memory, ...) before giving up with :class:`WorkerLost`.
         After each break the chunks without a result are computed again.
+
+    Raises
+    ------
+    MissingMainGuard
+        From :meth:`map_chunks`, when the pool broke because the workers
+        import the ``__main__`` script again and its top level, outside
+        ``if __name__ == "__main__":``, starts workers itself.
     """
 
     def __init__(self, workers: int, *, max_restarts: int = 3):
@@ -207,6 +221,14 @@ class LocalProcesses:
                 if fut.done() and not fut.cancelled() and fut.exception() is None:
                     deliver(fut, span)
             self._discard()
+            unguarded = unguarded_main_call()
+            if unguarded is not None:  # every new pool would break the same way: say why, now
+                path, line = unguarded
+                raise MissingMainGuard(
+                    f"local worker processes import {path} again when they start, and its line {line} starts "
+                    f"worker processes outside `if __name__ == \"__main__\":`, so every worker died starting; "
+                    "put the script's top-level code under that guard (docs/scale-out.md)"
+                )
             breaks += 1
             self.restarts += 1
             todo = [s for s in todo if s not in finished]

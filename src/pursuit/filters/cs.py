@@ -449,7 +449,7 @@ class AdaptiveCSFilter(_AxisFilter):
         Alternatively, the false-alarm probability p; M = χ²₁⁻¹(1 − p).
     variance
         σ_a² law: ``"displacement"`` (default, (4 − π)/π Δa²),
-        ``"linear"`` (c_a |Δa|), ``"rayleigh"`` (the standard CS variance
+        ``"linear"`` (``c_a * abs(Δa)``), ``"rayleigh"`` (the standard CS variance
         at ā, i.e. no displacement adaptation), ``"fixed"`` (``sigma_a²``).
     c_a
         Slope of the ``"linear"`` law (m/s²).
