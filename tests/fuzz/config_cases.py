@@ -130,6 +130,9 @@ def applicable(doc: dict, case: ConfigCase) -> bool:
         return get(doc, ("experiment", "kind"), "montecarlo") == "montecarlo"
     if p == ("paper", 0, "at"):
         return get(doc, ("paper", 0)) is not None and get(doc, ("experiment", "kind")) == "sweep"
+    if case.value == "int":  # an integer for an integral float
+        v = get(doc, p)
+        return isinstance(v, float) and v.is_integer()
     if p in (("figures", "values"), ("figures", "snapshot_steps")):
         return get(doc, p) is not None
     return get(doc, p) is not None
@@ -143,7 +146,7 @@ def _resolve(doc: dict, case: ConfigCase) -> dict:
             doc = edit(doc, ("filters", 0, "name"), v)
     elif v == "int":
         v = get(doc, case.path)
-        v = int(v) if isinstance(v, float) and v.is_integer() else v + 1 - 1
+        v = int(v)
     return edit(doc, case.path, v)
 
 
@@ -152,7 +155,8 @@ def _tables(output) -> list:
     result = []
     for t in output.tables:
         keep = [i for i, c in enumerate(t.columns) if not any(k in str(c).lower() for k in _TIMING)]
-        rows = [tuple(_norm(r[i]) for i in keep) for r in t.rows]
+        # rows about wall time (a paper's timing beside ours) measure the machine too
+        rows = [tuple(_norm(r[i]) for i in keep) for r in t.rows if not any(isinstance(x, str) and "wall" in x.lower() for x in r)]
         result.append((t.name, [t.columns[i] for i in keep], rows))
     return result
 
