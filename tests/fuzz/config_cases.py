@@ -62,7 +62,8 @@ MUTATIONS: list[tuple[tuple, Any, str]] = [
     (("filters", 1, "name"), "=filters0", "reject"),
     (("figures", "trajectory_run"), 2, "reject"),
     (("figures", "values"), [NAN], "reject"),
-    (("figures", "snapshot_steps"), [1000], "reject"),
+    (("figures", "snapshot_steps"), [1000], "reject"),  # past the last step
+    (("figures", "snapshot_value"), 12345, "reject"),  # not a swept value (as paper.at)
     (("paper", 0, "metric"), "nonsense", "reject"),
     (("paper", 0, "at"), 12345, "reject"),
     (("filters", 0, "particles"), 50, "reject-if-swept"),
@@ -135,6 +136,8 @@ def applicable(doc: dict, case: ConfigCase) -> bool:
         return isinstance(v, float) and v.is_integer()
     if p in (("figures", "values"), ("figures", "snapshot_steps")):
         return get(doc, p) is not None
+    if p == ("figures", "snapshot_value"):
+        return bool(get(doc, ("figures", "snapshot_steps")))
     return get(doc, p) is not None
 
 
