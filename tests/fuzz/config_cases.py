@@ -77,6 +77,9 @@ MUTATIONS: list[tuple[tuple, Any, str]] = [
     (("scenario", "sigma"), "int", "same"),
 ]
 
+# Filters that take `gate` (docs/configuration.md) and the particle filters.
+_GATED = ("kf", "ekf", "ukf", "ckf", "cs", "apcs", "ms", "singer", "imm", "imm-singer")
+_PARTICLE = ("pf", "upf", "cs-pf", "ics-pf")
 # Columns that measure the machine, not the filters.
 _TIMING = ("time", "wall", "cost", "speed", "per_step_s", "seconds")
 _CHECKED = ("rmse", "nees", "nis", "anees", "anis")
@@ -119,10 +122,11 @@ def applicable(doc: dict, case: ConfigCase) -> bool:
     if case.expect == "reject-if-swept":
         return get(doc, ("sweep", "parameter")) == "particles"
     if p == ("filters", 0, "particles") and case.expect == "size":
-        return get(doc, ("sweep", "parameter")) != "particles" and any(f.get("type") in ("pf", "upf", "cs-pf", "ics-pf") for f in doc.get("filters", []))
+        particle = any(f.get("type") in _PARTICLE for f in doc.get("filters", []))
+        return get(doc, ("sweep", "parameter")) != "particles" and particle
     if p[-1] in ("colour", "type", "gate", "fading", "name"):
         parent = get(doc, p[:-1])
-        if p[-1] == "gate" and isinstance(parent, dict) and parent.get("type") not in ("kf", "ekf", "ukf", "ckf", "cs", "apcs", "ms", "singer", "imm", "imm-singer"):
+        if p[-1] == "gate" and isinstance(parent, dict) and parent.get("type") not in _GATED:
             return False
         if p[-1] == "fading" and isinstance(parent, dict) and parent.get("type") not in ("kf", "ekf", "ukf", "ckf"):
             return False

@@ -21,7 +21,8 @@ def _report(outcomes) -> str:
     lines = [table(outcomes)]
     for (kind, outcome, reason), cases in sorted(failures(outcomes).items()):
         o = cases[0]
-        lines.append(f"{kind} / {outcome} x{len(cases)}: {o.name}: {o.why.strip()[-300:]}  $ pursuit {' '.join(o.reproducer.get('argv', []))}")
+        argv = " ".join(o.reproducer.get("argv", []))
+        lines.append(f"{kind} / {outcome} x{len(cases)}: {o.name}: {o.why.strip()[-300:]}  $ pursuit {argv}")
     return "\n".join(lines)
 
 

@@ -25,9 +25,18 @@ def test_csv_lines_the_docs_read():
     assert csv_line_oracle("# a comment") is None and csv_line_oracle("") is None
 
 
-@pytest.mark.parametrize("line", ['{"time": 1.0, "sensor": "A1", "value": 1.0, "time": 2.0}', '{"time": 1.0, "sensor": "A1", "value": Infinity}',
-                                  '{"time": 1.0, "sensor": "A1", "value": ４１.5}', '{"time": 1.0, "sensor": "A1", "value": 1.0, "note": 1}',
-                                  '{"sensor": "A1", "value": 1.0}', '{"time": 1.0, "sensor": "A1", "value": [1.0, 2.0]}', '[1.0]'])
+@pytest.mark.parametrize(
+    "line",
+    [
+        '{"time": 1.0, "sensor": "A1", "value": 1.0, "time": 2.0}',
+        '{"time": 1.0, "sensor": "A1", "value": Infinity}',
+        '{"time": 1.0, "sensor": "A1", "value": ４１.5}',
+        '{"time": 1.0, "sensor": "A1", "value": 1.0, "note": 1}',
+        '{"sensor": "A1", "value": 1.0}',
+        '{"time": 1.0, "sensor": "A1", "value": [1.0, 2.0]}',
+        "[1.0]",
+    ],
+)
 def test_jsonl_lines_the_docs_call_bad(line):
     assert jsonl_line_oracle(line) == "bad"
 

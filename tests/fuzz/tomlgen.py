@@ -12,8 +12,6 @@ import json
 import math
 from typing import Any
 
-Path_ = tuple  # a path of keys and list indices
-
 DELETE = object()  # a mutation value that removes the key
 
 
@@ -65,9 +63,7 @@ def dumps(doc: dict) -> tuple[str, dict[tuple, int]]:
             where[prefix] = len(lines)
         subs = []
         for k, v in t.items():
-            if isinstance(v, dict) and not (prefix and prefix[-1:] == ("fading",)) and _has_tables(v):
-                subs.append((k, v))
-            elif _is_table_array(v) and _has_tables_list(v):
+            if isinstance(v, dict) or _is_table_array(v):  # a section or [[tables]] (an inline table reads back the same)
                 subs.append((k, v))
             else:
                 lines.append(f"{_key(k)} = {_value(v)}")
@@ -90,14 +86,6 @@ def _names(prefix: tuple) -> list[str]:
     return [p for p in prefix if isinstance(p, str)]
 
 
-def _has_tables(v: dict) -> bool:
-    return True  # every sub-dict of the shipped files is a section or a [[table]], not an inline table
-
-
-def _has_tables_list(v: list) -> bool:
-    return True
-
-
 def edit(doc: dict, path: tuple, value: Any) -> dict:
     """A copy of ``doc`` with ``path`` set to ``value`` (or removed, for DELETE)."""
     new = copy.deepcopy(doc)
@@ -114,6 +102,7 @@ def edit(doc: dict, path: tuple, value: Any) -> dict:
 
 
 def get(doc: dict, path: tuple, default: Any = None) -> Any:
+    """The value at ``path`` in ``doc``, or ``default`` when there is none."""
     node = doc
     for p in path:
         try:

@@ -318,7 +318,8 @@ def run_case(case: TrackCase, folder: Path) -> Outcome:
     text = _text(case, case.lines)
     res, written, data = _invoke(case, text, folder, "data")
     source = "<stdin>" if case.stream else str(data)
-    repro = {"files": {f"data.{case.fmt}": text}, "argv": _argv(case, "-" if case.stream else f"data.{case.fmt}", None, _model(case.valid, folder))}
+    shown = "-" if case.stream else f"data.{case.fmt}"
+    repro = {"files": {f"data.{case.fmt}": text}, "argv": _argv(case, shown, None, _model(case.valid, folder))}
     if case.valid != VALID:
         repro["files"]["wide.toml"] = (folder / "wide.toml").read_text()
 
