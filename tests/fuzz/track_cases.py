@@ -410,8 +410,39 @@ def run_self_output(rng: random.Random, folder: Path) -> Outcome:
     return Outcome("track", name, CLEAN_ERROR, "", repro)
 
 
+def run_output_through_link(rng: random.Random, folder: Path) -> Outcome:
+    """``-o`` a symbolic link (issue 16 item 3): written through to its target, still a link; left alone on error."""
+    good = rng.random() < 0.5
+    text = "time,sensor,value\n1.0,A1,41.5\n2.0,A2,98.3\n" + ("" if good else "3.0,A9,1.0\n")
+    data = folder / "data.csv"
+    data.write_text(text)
+    target, link = folder / "target.csv", folder / "link.csv"
+    target.write_text("previous output\n")
+    os.symlink(target, link)
+    argv = ["track", str(data), "-c", str(MODEL), "-o", str(link)]
+    res = run_cli(argv)
+    repro = {"files": {"data.csv": text}, "argv": ["track", "data.csv", "-c", str(MODEL), "-o", "link.csv"]}
+    name = f"-o through a symbolic link ({'good' if good else 'bad'} data)"
+    failed = classify_cli(res)
+    if failed:
+        return Outcome("track", name, failed, (res.exc or res.err)[-800:], repro)
+    if not link.is_symlink() or os.readlink(link) != str(target):
+        return Outcome("track", name, WRONG if good else PARTIAL, "the link was replaced", repro)
+    if not good:
+        if res.code != 2 or target.read_text() != "previous output\n":
+            return Outcome("track", name, PARTIAL if target.read_text() != "previous output\n" else WRONG, f"exit {res.code}", repro)
+        return Outcome("track", name, CLEAN_ERROR, "", repro)
+    ref = run_cli(["track", str(data), "-c", str(MODEL)])
+    if res.code != 0 or target.read_text() != ref.out:
+        return Outcome("track", name, WRONG, f"exit {res.code}; the target does not hold the estimates", repro)
+    return Outcome("track", name, ACCEPTED, "", repro)
+
+
 def generate(rng: random.Random, folder: Path) -> Outcome:
     """One seeded track case, run and judged."""
-    if rng.random() < 0.05:
+    r = rng.random()
+    if r < 0.05:
         return run_self_output(rng, folder)
+    if r < 0.08:
+        return run_output_through_link(rng, folder)
     return run_case(make_case(rng), folder)
