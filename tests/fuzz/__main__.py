@@ -11,7 +11,7 @@ import argparse
 import sys
 import time
 
-from .runner import KINDS, failures, run, table
+from .runner import KINDS, failures, run, run_every_mutation, table
 
 
 def main(argv=None) -> int:
@@ -21,11 +21,16 @@ def main(argv=None) -> int:
     p.add_argument("--kinds", nargs="+", choices=KINDS, default=list(KINDS), help="which inputs to fuzz")
     p.add_argument("--max-seconds", type=float, help="stop starting new cases after this long")
     p.add_argument("--full", action="store_true", help="also run every accepted configuration through `pursuit run` (slow: figures)")
+    p.add_argument("--every-mutation", action="store_true", help="run each model and config mutation once on every base (no sampling)")
     p.add_argument("--show", type=int, default=1, help="reproducers shown per failing group (default 1)")
     args = p.parse_args(argv)
     start = time.monotonic()
-    outcomes = run(args.cases, args.seed, tuple(args.kinds), args.max_seconds, args.full)
-    print(f"{len(outcomes)} cases, seed {args.seed}, {time.monotonic() - start:.1f} s\n")
+    if args.every_mutation:
+        outcomes = run_every_mutation(tuple(args.kinds), args.max_seconds)
+        print(f"{len(outcomes)} cases (every mutation), {time.monotonic() - start:.1f} s\n")
+    else:
+        outcomes = run(args.cases, args.seed, tuple(args.kinds), args.max_seconds, args.full)
+        print(f"{len(outcomes)} cases, seed {args.seed}, {time.monotonic() - start:.1f} s\n")
     print(table(outcomes))
     groups = failures(outcomes)
     if groups:

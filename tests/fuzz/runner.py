@@ -51,6 +51,24 @@ def run(cases: int, seed: int, kinds=KINDS, max_seconds: float | None = None, fu
     return outcomes
 
 
+def run_every_mutation(kinds=("model", "config"), max_seconds: float | None = None) -> list[Outcome]:
+    """Every model and config mutation on every base, once (no sampling): the exhaustive pass."""
+    start = time.monotonic()
+    outcomes: list[Outcome] = []
+    cache: dict = {}
+    cases = [("model", c) for c in model_cases.all_cases() if "model" in kinds]
+    cases += [("config", c) for c in config_cases.all_cases() if "config" in kinds]
+    for kind, case in cases:
+        if max_seconds is not None and time.monotonic() - start > max_seconds:
+            break
+        with tempfile.TemporaryDirectory(prefix=f"pursuit-fuzz-{kind}-") as d:
+            if kind == "model":
+                outcomes.append(model_cases.run_case(case, Path(d), cache))
+            else:
+                outcomes.append(config_cases.run_case(case, Path(d)))
+    return outcomes
+
+
 def table(outcomes: list[Outcome]) -> str:
     """kind × outcome counts as a Markdown table."""
     counts = Counter((o.kind, o.outcome) for o in outcomes)
