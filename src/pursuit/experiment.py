@@ -217,7 +217,7 @@ def load_experiment(path: str | Path) -> Experiment:
     """
     path = Path(path)
     text, doc = read_toml(path)
-    if "experiment" not in doc and {"motion", "sensors"} <= set(doc):
+    if "experiment" not in doc and "sensors" in doc and {"motion", "imm"} & set(doc):
         raise ConfigError(path, f"this is a `pursuit track` model file, not an experiment: run it as pursuit track DATA --config {path}")
     try:
         exp = _build(doc, path)

@@ -8,6 +8,7 @@ import os
 import subprocess
 import sys
 import threading
+from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ import pytest
 from pursuit.cli import main
 from pursuit.io import load_track_model, read_records, track_records
 
-from .conftest import EXAMPLES, ROOT
+from .conftest import EXAMPLES, ROOT, read_truth
 
 WSN_MODEL = str(EXAMPLES / "wsn-range.toml")
 WSN_CSV = str(EXAMPLES / "data" / "wsn-range.csv")
@@ -281,6 +282,12 @@ def test_a_huge_gap_names_the_time_field(tmp_path, capsys):
     data.write_text("time,sensor,value\n1.0,A1,40\n1e300,A1,41\n")
     assert main(["track", str(data), "-c", WSN_MODEL]) == 2
     err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith(f"pursuit track: error: {data}:3: time: 1e+300 is 1e+300 s after time 1.0 (line 2), more than the largest gap")
+    # without a max_gap the filter's own guard refuses it
+    model = tmp_path / "unlimited.toml"
+    model.write_text(Path(WSN_MODEL).read_text() + "\n[input]\nmax_gap = inf\n")
+    assert main(["track", str(data), "-c", str(model)]) == 2
+    err = capsys.readouterr().err.splitlines()
     assert err[0] == (
         f"pursuit track: error: {data}:3: time: rejected at time 1e+300: 1e+300 s after the previous step at 1.0 "
         "is a gap the filter cannot predict across (the filter failed: a number overflows)"
@@ -373,3 +380,114 @@ def test_an_output_that_cannot_be_written_is_one_line_and_exit_2(stream, to_stdo
     where = "standard output" if to_stdout else "/dev/full"
     assert done.returncode == 2
     assert done.stderr.strip().splitlines() == [f"pursuit track: error: {where}: cannot write: No space left on device"]
+
+
+# --------------------------------------------------------------------------
+# a corrupt time in a stream; real-data inputs (issues 16 and 17)
+# --------------------------------------------------------------------------
+def test_one_absurd_time_in_a_live_stream_is_a_bad_record_and_the_stream_goes_on(capsys, monkeypatch):
+    lines = Path(WSN_JSONL).read_text().splitlines(keepends=True)
+    spoiled = json.loads(lines[9])
+    spoiled["time"] = 1e15
+    data = "".join(lines[:9] + [json.dumps(spoiled) + "\n"] + lines[10:]).encode()
+    _stdin(monkeypatch, data)
+    assert main(["track", "-", "-c", WSN_MODEL, "--skip-bad"]) == 0
+    cap = capsys.readouterr()
+    assert cap.err.splitlines() == [
+        "pursuit track: skipped: <stdin>:10: time: 1000000000000000.0 is 1e+15 s after time 4.0 (line 8), more than "
+        "the largest gap the model predicts across (input.max_gap = 141421 s): a corrupt time?",
+        "pursuit track: skipped 1 bad record(s) in <stdin>",
+    ]
+    _stdin(monkeypatch, "".join(lines[:9] + lines[10:]).encode())
+    assert main(["track", "-", "-c", WSN_MODEL]) == 0
+    assert cap.out == capsys.readouterr().out  # the estimates of the stream without the bad line
+    _stdin(monkeypatch, data)  # without --skip-bad: a bad record stops a stream, as any other
+    assert main(["track", "-", "-c", WSN_MODEL]) == 2
+    assert "<stdin>:10: time: 1000000000000000.0 is 1e+15 s after" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra", [[], ["--skip-bad"], ["--stream"], ["--stream", "--skip-bad"]])
+def test_the_truth_file_gives_one_header_error_not_one_per_row(tmp_path, capsys, extra):
+    out = tmp_path / "est.csv"
+    argv = ["track", str(EXAMPLES / "data" / "wsn-range-truth.csv"), "-c", WSN_MODEL, "-o", str(out)] + extra
+    assert main(argv) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 2, err
+    assert err[0].startswith(
+        f"pursuit track: error: {EXAMPLES / 'data' / 'wsn-range-truth.csv'}:1: header: expected the columns "
+        "time,sensor and the value column(s) (value, or one per component such as x,y); found 'time,x,vx,y,vy' (missing sensor)"
+    )
+    assert err[1].startswith("pursuit track: error: ") and "no usable header, so no record was read" in err[1]
+    assert out.exists() == ("--stream" in extra)  # a stream has written its header line only
+
+
+GPS_MODEL = """
+[motion]
+type = "cv"
+q = 0.01
+[[sensors]]
+id = "gps"
+type = "position"
+sigma = 2.0
+[prior]
+time = 0.0
+mean = [10.0, 0.5, 40.0, 0.8]
+cov = [4.0, 0.25, 4.0, 0.25]
+[filter]
+type = "kf"
+"""
+
+
+def _gps_rows(n=20):
+    t, states = read_truth_file()
+    rng = np.random.default_rng(3)
+    xy = states[:n, [0, 2]] + rng.normal(0.0, 2.0, (n, 2))
+    return t[:n].tolist(), xy.tolist()  # Python floats: repr writes them as plain numbers
+
+
+def read_truth_file():
+    return read_truth(EXAMPLES / "data" / "wsn-range-truth.csv")
+
+
+def _track(tmp_path, capsys, model_text, data_text, name):
+    model, data = tmp_path / f"{name}.toml", tmp_path / f"{name}.csv"
+    model.write_text(model_text)
+    data.write_text(data_text)
+    code = main(["track", str(data), "-c", str(model)])
+    cap = capsys.readouterr()
+    assert code == 0, cap.err
+    assert cap.err == ""
+    return cap.out
+
+
+def test_a_time_sensor_x_y_file_wide_columns_and_iso_times_all_give_the_same_estimates(tmp_path, capsys):
+    t, xy = _gps_rows()
+    long = "time,sensor,value\n" + "".join(f"{a!r},gps,{x!r},{y!r}\n" for a, (x, y) in zip(t, xy))
+    ref = _track(tmp_path, capsys, GPS_MODEL, long, "long")
+    assert len(ref.splitlines()) == len(t) + 1
+    # time,sensor,x,y: no option needed
+    named = "time,sensor,x,y\n" + long.split("\n", 1)[1]
+    assert _track(tmp_path, capsys, GPS_MODEL, named, "named") == ref
+    # a wide file with renamed columns (and one the model does not use)
+    wide_model = GPS_MODEL + '[input]\ntime_column = "t"\ncolumns = {gps = ["east", "north"]}\n'
+    wide = "north,t,hdop,east\n" + "".join(f"{y!r},{a!r},0.9,{x!r}\n" for a, (x, y) in zip(t, xy))
+    assert _track(tmp_path, capsys, wide_model, wide, "wide") == ref
+    # ISO 8601 times, counted from the model's time origin
+    iso_model = GPS_MODEL + "[input]\ntime_origin = 2026-07-01T12:00:00+02:00\n"
+    start = datetime(2026, 7, 1, 10, tzinfo=timezone.utc)
+    iso = "time,sensor,x,y\n" + "".join(
+        f"{(start + timedelta(seconds=float(a))).isoformat().replace('+00:00', 'Z')},gps,{x!r},{y!r}\n" for a, (x, y) in zip(t, xy)
+    )
+    assert all(a == round(a) for a in t)  # whole seconds: the ISO text is exact
+    assert _track(tmp_path, capsys, iso_model, iso, "iso") == ref
+
+
+def test_iso_times_from_the_epoch_with_a_prior_at_zero_name_the_gap(tmp_path, capsys):
+    # the prior at t = 0 is 1970: the first record is decades after it, an error that names max_gap
+    model, data = tmp_path / "m.toml", tmp_path / "d.csv"
+    model.write_text(GPS_MODEL)
+    data.write_text("time,sensor,x,y\n2026-07-01T00:00:00Z,gps,10,40\n")
+    assert main(["track", str(data), "-c", str(model)]) == 2
+    err = capsys.readouterr().err
+    assert f"{data}:2: time: 1782864000.0 is 1.78286e+09 s after the prior's time 0.0, more than the largest gap" in err
+    assert "input.max_gap" in err

@@ -3,11 +3,16 @@
 from __future__ import annotations
 
 import io
+import json
 import math
+from datetime import datetime, timedelta, timezone
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pursuit.io import BadRecord, Record, check_record, read_csv, read_jsonl, read_records
+from pursuit.io.input_spec import InputSpec
 from pursuit.io.model import Sensor
 
 
@@ -80,10 +85,12 @@ def test_bad_csv_lines_name_their_line_and_field(line, field, message):
     assert [r.line for r in out if isinstance(r, Record)] == [2, 4]
 
 
-def test_a_missing_header_is_reported_and_the_rest_still_read():
+def test_a_missing_header_is_one_error_and_reading_stops_there():
+    # every row would be misread: one error at the header, not one per row (issue 17)
     out = _csv("1,A,1\n2,A,2\n")
-    assert isinstance(out[0], BadRecord) and out[0].field == "header" and out[0].line == 1
-    _same(out[1:], [(2, 2.0, "A", (2.0,))])
+    assert len(out) == 1 and (out[0].line, out[0].field) == (1, "header")
+    assert out[0].message.startswith("expected the columns time,sensor and the value column(s)")
+    assert "found '1,A,1' (missing time,sensor)" in out[0].message
 
 
 @pytest.mark.parametrize(
@@ -224,3 +231,187 @@ def test_a_key_given_twice_in_a_json_record_is_bad():
     assert rec == BadRecord(1, "value", "given twice in one record")
     (ok,) = read_jsonl([b'{"time": 1.0, "sensor": "A", "value": 2.0}\n'])
     assert ok == Record(1, 1.0, "A", (2.0,))
+
+
+# --------------------------------------------------------------------------
+# headers that do not fit, named and wide columns (issue 17)
+# --------------------------------------------------------------------------
+def test_a_time_sensor_x_y_header_reads_position_records():
+    out = _csv("time,sensor,x,y\n1.0,gps,12.5,40.1\n2.0,gps,13.0,\n2.0,A,41.5\n")
+    _same(out, [(2, 1.0, "gps", (12.5, 40.1)), (3, 2.0, "gps", (13.0, math.nan)), (4, 2.0, "A", (41.5,))])
+
+
+def test_the_truth_file_header_is_one_error_naming_the_columns_expected_and_found():
+    out = _csv("time,x,vx,y,vy\n1.0,10.4,0.5,40.1,0.8\n2.0,10.9,0.5,40.9,0.8\n")
+    assert len(out) == 1 and (out[0].line, out[0].field) == (1, "header")
+    assert out[0].message.startswith(
+        "expected the columns time,sensor and the value column(s) (value, or one per component such as x,y); "
+        "found 'time,x,vx,y,vy' (missing sensor)"
+    )
+    assert "[input] columns" in out[0].message  # how to read such a file
+
+
+@pytest.mark.parametrize(
+    "header,problem",
+    [("time,sensor", "(no value column)"), ("time,sensor,value,Sensor", "(sensor given twice)"), ("t,sensor,value", "(missing time)")],
+)
+def test_other_headers_that_do_not_fit(header, problem):
+    out = _csv(f"# a comment\n{header}\n1,A,1\n")
+    assert [(r.line, r.field) for r in out] == [(2, "header")]
+    assert problem in out[0].message
+
+
+def test_renamed_and_reordered_columns():
+    spec = InputSpec(time_column="t", sensor_column="id")
+    out = list(read_csv([b"id, T ,range\n", b"A,1.5,12.0\n", b"B,2.5,13.0,14.0\n", b"A,3\n"], layout=spec))
+    _same(out[:2], [(2, 1.5, "A", (12.0,)), (3, 2.5, "B", (13.0, 14.0))])
+    assert out[2] == BadRecord(4, "record", "expected at least 3 fields (id, T, value), got 2")
+    (bad,) = read_csv([b"time,sensor,value\n", b"1,A,1\n"], layout=spec)
+    assert bad.field == "header" and bad.message.startswith("expected the columns t,id and the value column(s)")
+
+
+WIDE = InputSpec(time_column="t", columns={"gps": ("east", "north"), "A": ("r",)})
+
+
+def test_a_wide_file_gives_one_record_per_sensor_with_a_value():
+    text = "t,east,north,speed,r\n1.0,12.5,40.1,0.9,41.5\n2.0,13.0,,0.9,\n3.0,,nan,0.9,42.0\n4.0,,,,\n"
+    out = list(read_csv(text.encode().splitlines(keepends=True), layout=WIDE))
+    _same(
+        out[:4],
+        [
+            (2, 1.0, "gps", (12.5, 40.1)),
+            (2, 1.0, "A", (41.5,)),
+            (3, 2.0, "gps", (13.0, math.nan)),  # a missing component; A did not report
+            (4, 3.0, "A", (42.0,)),  # gps did not report: both empty or nan
+        ],
+    )
+    assert out[4] == Record(5, 4.0, None, ())  # nothing measured: an estimate at that time
+
+
+@pytest.mark.parametrize(
+    "row,field,message",
+    [
+        ("1.0,12.5,40.1,0.9", "record", "expected 5 fields as in the header, got 4"),
+        ("1.0,12.5,40.1,0.9,41.5,7", "record", "expected 5 fields as in the header, got 6"),
+        ("1.0,12.5,x,0.9,41.5", "north", "not a number: 'x'"),
+        ("soon,12.5,1,0.9,41.5", "time", "not a number: 'soon'"),
+    ],
+)
+def test_bad_wide_rows_name_their_line_and_column(row, field, message):
+    out = list(read_csv([b"t,east,north,speed,r\n", f"{row}\n".encode(), b"2.0,1,2,3,4\n"], layout=WIDE))
+    assert out[0] == BadRecord(2, field, message)
+    assert [r.line for r in out[1:]] == [3, 3]
+
+
+def test_an_empty_input_names_the_header_the_layout_expects():
+    (bad,) = read_csv([b"# nothing yet\n"], layout=WIDE)
+    assert bad == BadRecord(1, "header", "missing: the input has only blank and comment lines (expected the header 't,east,north,r')")
+
+
+def test_a_wide_header_without_the_mapped_columns_names_them():
+    (bad,) = read_csv([b"t,x,y,r\n", b"1,2,3,4\n"], layout=WIDE)
+    assert bad.line == 1 and bad.field == "header"
+    assert bad.message == (
+        "expected the columns t,east,north,r (from [input] in the model file; other columns are ignored); "
+        "found 't,x,y,r' (missing east,north)"
+    )
+
+
+# --------------------------------------------------------------------------
+# ISO 8601 times (issue 17)
+# --------------------------------------------------------------------------
+T0 = 1782864000.0  # 2026-07-01T00:00:00Z in seconds after the Unix epoch
+
+
+@pytest.mark.parametrize(
+    "text,seconds",
+    [
+        ("2026-07-01T00:00:00Z", T0),
+        ("2026-07-01T00:00:01.25Z", T0 + 1.25),
+        ("2026-07-01T02:00:00+02:00", T0),
+        ("2026-06-30T23:30:00-0030", T0),
+        ("2026-07-01 00:00:00", T0),  # naive: UTC
+        ("2026-07-01", T0),
+        ("2026-07-01T00:01", T0 + 60.0),
+    ],
+)
+def test_iso_times_are_seconds_after_the_epoch(text, seconds):
+    (rec,) = read_csv([b"time,sensor,value\n", f"{text},A,1\n".encode()])
+    assert rec == Record(2, seconds, "A", (1.0,))
+    (rec,) = read_jsonl([f'{{"time": "{text}", "sensor": "A", "value": 1}}\n'.encode()])
+    assert rec == Record(1, seconds, "A", (1.0,))
+
+
+def test_iso_times_after_a_chosen_origin():
+    spec = InputSpec(time_origin=datetime(2026, 7, 1, tzinfo=timezone.utc))
+    out = list(read_csv([b"time,sensor,value\n", b"2026-07-01T00:00:00.5Z,A,1\n", b"2026-07-01T01:00:00+01:00,A,2\n"], layout=spec))
+    assert [r.time for r in out] == [0.5, 0.0]
+    (rec,) = read_jsonl([b'{"time": "2026-07-01T00:00:02Z"}\n'], layout=spec)
+    assert rec == Record(1, 2.0, None, ())
+
+
+@pytest.mark.parametrize(
+    "text,message",
+    [
+        ("2026-13-01T00:00:00Z", "not a valid ISO 8601 time: '2026-13-01T00:00:00Z' (month must be in 1..12)"),
+        ("2026-07-01T23:59:60Z", "not a valid ISO 8601 time"),
+        ("2026-07-01X00:00", "not a number"),
+        ("2026-07-01T00:00:00 UTC", "not a number"),
+        ("２026-07-01", "not a number"),
+    ],
+)
+def test_bad_iso_times(text, message):
+    (bad,) = read_csv([b"time,sensor,value\n", f"{text},A,1\n".encode()])
+    assert (bad.line, bad.field) == (2, "time") and bad.message.startswith(message)
+    (bad,) = read_jsonl([json.dumps({"time": text, "sensor": "A", "value": 1}).encode() + b"\n"])
+    assert (bad.line, bad.field) == (1, "time")
+
+
+@pytest.mark.parametrize("fmt", ["csv", "jsonl"])
+def test_mixing_numeric_and_iso_times_is_a_bad_record_naming_the_line(fmt):
+    def lines(*times):
+        if fmt == "csv":
+            return [b"time,sensor,value\n", b"bad,A,1\n", *(f"{t},A,1\n".encode() for t in times)]
+        return [b"{}\n", *(json.dumps({"time": t, "sensor": "A", "value": 1}).encode() + b"\n" for t in times)]
+
+    out = list(read_records(lines("2026-07-01T00:00:00Z", 1782864001.0, "2026-07-01T00:00:02Z"), fmt))
+    assert [type(r).__name__ for r in out] == ["BadRecord", "Record", "BadRecord", "Record"]
+    assert (out[2].line, out[2].field) == (4 if fmt == "csv" else 3, "time")
+    first = 3 if fmt == "csv" else 2  # the first good time decides; the bad line before it does not
+    assert out[2].message == (
+        f"a number of seconds, but the times of this input are ISO 8601 date-times (since line {first}); use one kind in one input"
+    )
+    out = list(read_records(lines(1.0, "2026-07-01T00:00:00Z"), fmt))
+    assert out[2].message.startswith(f"an ISO 8601 date-time, but the times of this input are numbers of seconds (since line {first})")
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.datetimes(
+        min_value=datetime(1, 1, 2), max_value=datetime(9999, 12, 30),
+        timezones=st.sampled_from([None, timezone.utc, timezone(timedelta(hours=5, minutes=30)), timezone(-timedelta(hours=11))]),
+    )
+)
+def test_any_iso_time_python_writes_is_read_as_its_seconds_after_the_epoch(when):
+    text = when.isoformat()
+    expected = (when if when.tzinfo else when.replace(tzinfo=timezone.utc)) - datetime(1970, 1, 1, tzinfo=timezone.utc)
+    (rec,) = read_csv([b"time,sensor,value\n", f"{text},A,1\n".encode()])
+    assert rec == Record(2, expected.total_seconds(), "A", (1.0,))
+
+
+iso_like = st.from_regex(r"\A[0-9]{4}-[0-9]{2}-[0-9]{2}([T ][0-9]{2}(:[0-9]{2}(:[0-9]{2}([.,][0-9]{1,9})?)?)?(Z|[+-][0-9]{2}(:?[0-9]{2})?)?)?\Z")
+cell = st.one_of(iso_like, st.sampled_from(["", "nan", "1.5", "-3", "1e999", "x"]), st.text(max_size=6))
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.lists(cell, min_size=1, max_size=6), max_size=12), st.booleans())
+def test_iso_like_times_and_wide_rows_never_raise(rows, wide):
+    text = "t,east,north,r\n" if wide else "time,sensor,value\n"
+    text += "".join(",".join(c.replace('"', "").replace("\n", "").replace("\r", "") for c in row) + "\n" for row in rows)
+    layout = WIDE if wide else None
+    for r in read_csv(text.encode().splitlines(keepends=True), layout=layout):
+        assert isinstance(r, (Record, BadRecord))
+        if isinstance(r, Record):
+            assert math.isfinite(r.time)
+        else:
+            assert r.field and "\n" not in r.message

@@ -1,6 +1,8 @@
 """Recorded and live measurements in, estimates out: the engine behind ``pursuit track``.
 
 * :mod:`~pursuit.io.model`: MODEL.toml (motion model, sensors, prior, filter);
+* :mod:`~pursuit.io.input_spec`: the model file's ``[input]`` section (CSV
+  column names, the origin of ISO 8601 times, the largest believable gap);
 * :mod:`~pursuit.io.records`: CSV and JSON Lines readers that turn every bad
   record into a message with its line and field, never an exception;
 * :mod:`~pursuit.io.steps`: records grouped into filter steps by time, and

@@ -28,6 +28,7 @@ import sys
 from pathlib import Path
 from typing import BinaryIO, TextIO
 
+from .extras import Extras
 from .model import TrackModel, load_track_model
 from .output_file import same_file, same_file_as_stream, write_whole
 from .records import FORMATS, BadRecord, read_records
@@ -59,6 +60,8 @@ def add_track_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     mode = tp.add_mutually_exclusive_group()
     mode.add_argument("--stream", dest="stream", action="store_true", default=None, help="filter records as they arrive and flush each estimate (default for standard input)")
     mode.add_argument("--batch", dest="stream", action="store_false", help="read everything first and write all or nothing (default for files)")
+    tp.add_argument("--truth", metavar="FILE", help="truth CSV (time and state columns): print RMSE and NEES of the estimates at its times on standard error")
+    tp.add_argument("--plot", metavar="FILE", help="draw the track (estimate, 2-sigma covariance ellipses, measurements, truth) into FILE (.png, .pdf or .svg)")
     tp.add_argument("--skip-bad", action="store_true", help="report bad records, skip them and go on (default: stop with exit code 2)")
     tp.add_argument(
         "--out-of-order",
@@ -66,6 +69,9 @@ def add_track_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         help="records earlier than a time already reached: sort them in (batch default), drop them with a warning (stream default), or treat them as bad",
     )
     return tp
+
+
+_NO_START = "no step fixed a position to start the track from (see the warnings; or give a [prior])"
 
 
 class _Usage(Exception):
@@ -90,6 +96,11 @@ def run_track(args: argparse.Namespace, *, stdin: BinaryIO | None = None, stdout
         return EXIT_BAD_INPUT
     model = load_track_model(args.config)
     source = "<stdin>" if args.data == "-" else args.data
+    try:  # checked before any record is read, so a bad truth file or plot name costs no output
+        extras = Extras.prepare(args, model)
+    except ValueError as e:
+        print(f"pursuit track: error: {e}", file=stderr)
+        return EXIT_BAD_INPUT
     if args.output and (same_file(args.data, args.output) if args.data != "-" else same_file_as_stream(stdin, args.output)):
         # in a stream the output is opened while the input is read: it would truncate the recording
         print(f"pursuit track: error: {args.output}: the output is the input file {source}; choose another output", file=stderr)
@@ -102,10 +113,14 @@ def run_track(args: argparse.Namespace, *, stdin: BinaryIO | None = None, stdout
     try:
         lines = iter(fh.readline, b"") if streaming else fh
         # a stream's last line without its newline was cut off mid-write; a file's may just lack one
-        records = read_records(lines, in_fmt, unterminated="reject" if streaming else "hint")
+        records = extras.watch(
+            read_records(lines, in_fmt, unterminated="reject" if streaming else "hint", layout=model.input)
+        )
         if streaming:
-            return _stream(records, model, args, out_fmt, policy, source, stdout, stderr)
-        return _batch(records, model, args, out_fmt, policy, source, stdout, stderr)
+            code = _stream(records, model, args, out_fmt, policy, source, stdout, stderr, extras.sink)
+        else:
+            code = _batch(records, model, args, out_fmt, policy, source, stdout, stderr, extras.sink)
+        return extras.finish(stderr) if code == EXIT_OK else code
     except BrokenPipeError:
         # The reader of our output went away (``| head``): stop quietly, and point
         # standard output at /dev/null so that the interpreter's final flush
@@ -189,6 +204,20 @@ def _settings(args) -> tuple[str, str, bool, str]:
     return in_fmt, out_fmt, streaming, policy
 
 
+def _header_failed(stderr: TextIO, source: str, items: list, after: str = "") -> bool:
+    """Report the problems of an input whose CSV header is missing or does not fit; True if it is one.
+
+    Fatal even with --skip-bad: the reader stops at such a header, as every
+    row would be misread.
+    """
+    if not any(isinstance(item, BadRecord) and item.field == "header" for item in items):
+        return False
+    for item in items:
+        _report(stderr, source, item, "error")
+    print(f"pursuit track: error: {source}: no usable header, so no record was read{after}", file=stderr)
+    return True
+
+
 def _report(stderr: TextIO, source: str, item: BadRecord | Dropped, kind: str) -> None:
     field = "time" if isinstance(item, Dropped) else item.field
     print(f"pursuit track: {kind}: {source}:{item.line}: {field}: {item.message}", file=stderr)
@@ -197,8 +226,10 @@ def _report(stderr: TextIO, source: str, item: BadRecord | Dropped, kind: str) -
 # --------------------------------------------------------------------------
 # batch: all or nothing
 # --------------------------------------------------------------------------
-def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, stderr) -> int:
+def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, stderr, collected: list | None) -> int:
     result = track_records(records, model, out_of_order=policy)
+    if _header_failed(stderr, source, result.problems, "; nothing written"):
+        return EXIT_BAD_INPUT
     for item in result.dropped:
         _report(stderr, source, item, "warning")
     kind = "skipped" if args.skip_bad else "error"
@@ -214,8 +245,12 @@ def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, st
         return EXIT_BAD_INPUT
     if not result.estimates:
         what = f"all {len(result.problems)} records were bad" if result.problems else "it holds no measurement records"
+        if model.prior is None and result.dropped and not result.problems:
+            what = _NO_START
         print(f"pursuit track: error: {source}: nothing to track: {what}; nothing written", file=stderr)
         return EXIT_BAD_INPUT
+    if collected is not None:
+        collected.extend(result.estimates)
     buffer = io.StringIO()
     writer = make_writer(out_fmt, buffer, model.state_labels)
     writer.start()
@@ -240,7 +275,7 @@ def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, st
 # --------------------------------------------------------------------------
 # stream: estimate by estimate
 # --------------------------------------------------------------------------
-def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, stderr) -> int:
+def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, stderr, collected: list | None) -> int:
     if args.output:
         try:
             out = open(args.output, "w", encoding="utf-8", newline="")
@@ -249,7 +284,7 @@ def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, s
             return EXIT_BAD_INPUT
     else:
         out = stdout
-    written = skipped = 0
+    written = skipped = unused = 0
     try:
         guarded = _GuardedOutput(out)
         writer = make_writer(out_fmt, guarded, model.state_labels, flush_each=True)
@@ -258,10 +293,15 @@ def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, s
         for event in stream_records(records, model, out_of_order=policy, stop_at_bad=not args.skip_bad):
             if isinstance(event, Estimate):
                 writer.write(event)
+                if collected is not None:  # only for --truth / --plot: a live stream may run for days
+                    collected.append(event)
                 written += 1
             elif isinstance(event, Dropped):
                 _report(stderr, source, event, "warning")
                 stderr.flush()
+                unused += 1
+            elif _header_failed(stderr, source, [event]):
+                return EXIT_BAD_INPUT
             elif args.skip_bad:
                 _report(stderr, source, event, "skipped")
                 stderr.flush()
@@ -285,6 +325,8 @@ def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, s
         print(f"pursuit track: skipped {skipped} bad record(s) in {source}", file=stderr)
     if not written:  # the output holds only its header, written when the stream began
         what = f"all {skipped} records were bad" if skipped else "it held no measurement records"
+        if model.prior is None and unused and not skipped:
+            what = _NO_START
         print(f"pursuit track: error: {source}: nothing to track: {what}", file=stderr)
         return EXIT_BAD_INPUT
     return EXIT_OK

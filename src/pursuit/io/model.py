@@ -2,7 +2,7 @@
 
 A model file names everything a filter needs to run on recorded data::
 
-    [motion]                  # cv or ca, with its parameters
+    [motion]                  # cv, ca, ct or singer, with its parameters; or [imm] (io.motions)
     type = "cv"
     ndim = 2
     q = 0.01
@@ -13,14 +13,16 @@ A model file names everything a filter needs to run on recorded data::
     position = [0.0, 0.0]
     sigma = 1.0
 
-    [prior]
-    mean = [10.0, 0.5, 40.0, 0.8]
+    [prior]                   # optional: without it (or with from = "measurements")
+    mean = [10.0, 0.5, 40.0, 0.8]   # the first positions start the track (pursuit.io.initiate)
     cov = [4.0, 0.25, 4.0, 0.25]
     time = 0.0                # optional: the time the prior refers to
 
     [filter]                  # any registered filter (`pursuit list filters`) and its parameters
     type = "ekf"
     gate = 0.999
+
+    [input]                   # optional: CSV columns, ISO time origin, max_gap (pursuit.io.input_spec)
 
 Loading checks the whole file and reports the first problem as one line that
 names the file, the line and the field (:class:`pursuit.experiment.ConfigError`).
@@ -29,7 +31,7 @@ names the file, the line and the field (:class:`pursuit.experiment.ConfigError`)
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -39,9 +41,11 @@ from .. import registry
 from ..experiment import ConfigError, config_error, read_toml
 from ..gaussian import Gaussian
 from ..models.measurement import LinearGaussian, RangeSensors, TimeOfArrival
-from ..models.motion import ConstantAcceleration, ConstantVelocity
 from ..models.sensors import BearingSensors, stack
 from ..registry import REQUIRED, Component, Param
+from .input_spec import InputSpec, build_input_spec
+from .initiate import INITIATION_PARAMS, Initiation
+from .motions import IMM_FILTERS, MOTION_EXTRA_PARAMS, MOTION_TYPES, build_imm, build_motion, imm_motions
 
 __all__ = ["Sensor", "TrackModel", "load_track_model", "build_track_model", "SENSOR_TYPES", "DEFAULT_VALID"]
 
@@ -50,7 +54,7 @@ DEFAULT_VALID = (-1.0e9, 1.0e9)
 """Accepted measurement values unless a sensor sets ``valid``: anything
 outside is a bad record (it would only overflow the filter)."""
 
-_SECTIONS = ("motion", "sensors", "prior", "filter", "track")
+_SECTIONS = ("motion", "imm", "sensors", "prior", "filter", "track", "input")
 _SENSOR_ID = re.compile(r"^[^\s,\"#][^,\"\r\n]*(?<!\s)$")
 
 
@@ -70,6 +74,10 @@ class Sensor:
         Where its block starts in the filter's measurement vector.
     valid
         ``(low, high)``: values outside are bad records.
+    position
+        Where the sensor is (range, toa, bearing), else None.
+    c
+        Signal speed (toa), else None.
     """
 
     id: str
@@ -77,6 +85,8 @@ class Sensor:
     dim: int
     start: int
     valid: tuple[float, float]
+    position: tuple[float, ...] | None = None
+    c: float | None = None
 
     @property
     def block(self) -> slice:
@@ -95,7 +105,8 @@ class TrackModel:
     motion, measurement
         The models the filter uses; ``measurement`` stacks every sensor.
     prior
-        Gaussian prior on the state.
+        Gaussian prior on the state, or None when it is to be built from
+        the first measurements (``initiation``).
     prior_time
         Time the prior refers to, or None: then the first step is taken to
         come ``dt`` after the prior.
@@ -111,12 +122,19 @@ class TrackModel:
         Seed for filters that draw random numbers (particle filters).
     path
         The file it came from.
+    input
+        How to read the data (columns, ISO time origin) and the largest
+        believable time gap (``[input]``, :mod:`pursuit.io.input_spec`).
+    initiation
+        With no ``[prior]`` or ``[prior] from = "measurements"``: how the
+        prior is built from the first measurements
+        (:mod:`pursuit.io.initiate`); else None.
     """
 
     name: str
     motion: Any
     measurement: Any
-    prior: Gaussian
+    prior: Gaussian | None
     prior_time: float | None
     dt: float
     sensors: Mapping[str, Sensor]
@@ -126,6 +144,8 @@ class TrackModel:
     filter: Any
     seed: int
     path: Path | None = None
+    input: InputSpec = InputSpec()
+    initiation: Initiation | None = None
 
     @property
     def measurement_dim(self) -> int:
@@ -140,7 +160,7 @@ class _ScenarioView:
     name: str
     motion: Any
     measurement: Any
-    prior: Gaussian
+    prior: Gaussian | None
     dt: float
     state_labels: tuple[str, ...]
     position_indices: tuple[int, ...]
@@ -191,11 +211,12 @@ def _sensor_id(field: str, v: str) -> str:
 
 
 MOTION_PARAMS = (
-    Param("type", "str", REQUIRED, "motion model", choices=("cv", "ca")),
+    Param("type", "str", REQUIRED, "motion model", choices=MOTION_TYPES),
     Param("ndim", "int", 2, "spatial axes (1, 2 or 3)", check=_one_to_three),
-    Param("q", "float", REQUIRED, "acceleration (cv) or jerk (ca) noise intensity", check=_positive),
+    Param("q", "float", None, "acceleration (cv, ct) or jerk (ca) noise intensity", check=_positive),
     Param("noise", "str", "discrete", "white-noise model", choices=("discrete", "continuous")),
     Param("dt", "float", 1.0, "nominal interval, s: the first step's dt when [prior] has no time", check=_positive),
+    *MOTION_EXTRA_PARAMS,
 )
 
 SENSOR_PARAMS = (
@@ -253,15 +274,20 @@ def build_track_model(doc: Mapping[str, Any], name: str = "track", path: Path | 
     for key in doc:
         if key not in _SECTIONS:
             raise ValueError(f"{key}: unknown section (known: {', '.join(_SECTIONS)})")
-    for key in ("motion", "sensors", "prior", "filter"):
+    if "motion" in doc and "imm" in doc:
+        raise ValueError("imm: give either [motion] (one model) or [imm] (several), not both")
+    for key in ("motion" if "imm" not in doc else "imm", "sensors", "filter"):
         if key not in doc:
             raise ValueError(f"{key}: required section is missing")
     track = _resolve(doc.get("track", {}), "track", TRACK_PARAMS)
-    motion, labels = _build_motion(_resolve(doc["motion"], "motion", MOTION_PARAMS))
+    if "imm" in doc:
+        imm_vals, modes, motion, labels = imm_motions(doc["imm"])
+    else:
+        vals = _resolve(doc["motion"], "motion", MOTION_PARAMS)
+        motion, labels = build_motion(vals, "motion", vals["ndim"], vals["dt"])
     n = motion.dim
     sensors, measurement = _build_sensors(doc["sensors"], motion)
-    prior_vals = _resolve(doc["prior"], "prior", PRIOR_PARAMS)
-    prior = _build_prior(prior_vals, n)
+    prior, prior_time, initiation = _prior_section(doc.get("prior"), n)
     view = _ScenarioView(
         name=track["name"] or name,
         motion=motion,
@@ -272,13 +298,13 @@ def build_track_model(doc: Mapping[str, Any], name: str = "track", path: Path | 
         position_indices=motion.position_indices,
         velocity_indices=motion.velocity_indices,
     )
-    filt = _build_filter(doc["filter"], view)
+    filt = _build_filter(doc["filter"], view) if "imm" not in doc else _imm_filter(doc["filter"], view, imm_vals, modes, doc["sensors"])
     return TrackModel(
         name=view.name,
         motion=motion,
         measurement=measurement,
         prior=prior,
-        prior_time=prior_vals["time"],
+        prior_time=prior_time,
         dt=motion.dt,
         sensors=sensors,
         state_labels=labels,
@@ -287,16 +313,22 @@ def build_track_model(doc: Mapping[str, Any], name: str = "track", path: Path | 
         filter=filt,
         seed=track["seed"],
         path=path,
+        input=build_input_spec(doc.get("input", {}), motion, sensors),
+        initiation=initiation,
     )
 
 
-def _build_motion(vals: dict[str, Any]):
-    cls = ConstantVelocity if vals["type"] == "cv" else ConstantAcceleration
-    motion = cls(ndim=vals["ndim"], dt=vals["dt"], q=vals["q"], noise=vals["noise"])
-    axes = "xyz"[: vals["ndim"]]
-    per_axis = ("{a}", "v{a}") if vals["type"] == "cv" else ("{a}", "v{a}", "a{a}")
-    labels = tuple(p.format(a=a) for a in axes for p in per_axis)
-    return motion, labels
+def _prior_section(table: Any, n: int) -> tuple[Gaussian | None, float | None, Initiation | None]:
+    """``[prior]`` with mean and cov, or (absent, or ``from = "measurements"``) an initiation rule."""
+    if table is None:
+        return None, None, Initiation()
+    if table == {}:
+        raise ValueError('prior: empty: give mean and cov, or from = "measurements" (or leave [prior] out) to start from the data')
+    if isinstance(table, dict) and "from" in table:
+        vals = _resolve(table, "prior", INITIATION_PARAMS)
+        return None, None, Initiation(vals["velocity_sigma"], vals["acceleration_sigma"])
+    vals = _resolve(table, "prior", PRIOR_PARAMS)
+    return _build_prior(vals, n), vals["time"], None
 
 
 def _build_prior(vals: dict[str, Any], n: int) -> Gaussian:
@@ -379,7 +411,8 @@ def _build_sensors(entries: Any, motion: Any) -> tuple[dict[str, Sensor], Any]:
         for v in members:
             dim = ndim if kind == "position" else 1
             valid = DEFAULT_VALID if v["valid"] is None else v["valid"]
-            sensors[v["id"]] = Sensor(v["id"], kind, dim, start, valid)
+            where_at = None if v["position"] is None else tuple(float(a) for a in v["position"])
+            sensors[v["id"]] = Sensor(v["id"], kind, dim, start, valid, where_at, c if kind == "toa" else None)
             start += dim
     ordered = {v["id"]: sensors[v["id"]] for v, _ in specs}
     return ordered, stack(parts)
@@ -399,3 +432,25 @@ def _build_filter(table: Any, view: _ScenarioView) -> Any:
     except (AttributeError, TypeError) as e:  # a builder that wants more than a track model gives
         raise ValueError(f"filter.type: {kind!r} cannot run on a track model ({e})") from None
 
+
+def _imm_filter(table: Any, view: _ScenarioView, imm_vals: dict[str, Any], modes: list[Any], sensors: Any) -> Any:
+    """``[imm]``: the ``[filter]`` type runs each mode (with the sensors read in its state); its gate and name go to the IMM."""
+    if not isinstance(table, dict):
+        raise ValueError("filter: expected a table")
+    values = dict(table)
+    kind = values.get("type")
+    if kind not in IMM_FILTERS:
+        raise ValueError(f"filter.type: with [imm] the filter runs each mode, so it must be one of {', '.join(IMM_FILTERS)}; got {kind!r}")
+    gate = values.pop("gate", None)
+    if gate is not None and (isinstance(gate, bool) or not isinstance(gate, (int, float)) or not 0.0 < gate < 1.0):
+        raise ValueError(f"filter.gate: a chi-square gate probability must lie in (0, 1), got {gate!r}")
+    name = values.pop("name", "")
+    if not isinstance(name, str):
+        raise ValueError(f"filter.name: expected a string, got {name!r}")
+    types = [m["type"] for m in imm_vals["modes"]]
+
+    def mode(motion: Any, i: int) -> Any:
+        measurement = view.measurement if motion is view.motion else _build_sensors(sensors, motion)[1]
+        return _build_filter({**values, "name": f"{kind.upper()} {types[i]}"}, replace(view, motion=motion, measurement=measurement))
+
+    return build_imm(imm_vals, modes, view.motion, mode, gate, name)

@@ -2,15 +2,22 @@
 
 Both formats carry one measurement of one sensor per record:
 
-* CSV: a header ``time,sensor,value`` (or ``time,sensor,values``), then one
-  row per record: the time in seconds, the sensor id, and the sensor's
-  components, one per column (a range or a bearing has one, a 2-D position
-  fix two).  An empty field or ``nan`` is a missing component.  Blank lines
-  and lines starting with ``#`` are ignored.
+* CSV: a header ``time,sensor,value`` (or ``time,sensor,x,y``: any names
+  for the value columns), then one row per record: the time, the sensor id,
+  and the sensor's components, one per column (a range or a bearing has one,
+  a 2-D position fix two).  An empty field or ``nan`` is a missing
+  component.  Blank lines and lines starting with ``#`` are ignored.  The
+  model file's ``[input]`` section may rename the time and sensor columns,
+  or describe a *wide* file whose rows hold named columns of several
+  sensors (:mod:`pursuit.io.input_spec`).
 * JSON Lines: one object per line, ``{"time": 1.5, "sensor": "A", "value":
   12.3}``; ``value`` may be a list (or use ``values``), ``null`` or NaN is a
   missing component.  ``{"time": 7.0}`` alone asks for an estimate at that
   time without a measurement.
+
+A time is a number of seconds (any origin) or an ISO 8601 date-time
+(``2026-07-01T12:00:00.25Z``), read as seconds after the model's
+``[input] time_origin`` (the Unix epoch unless set); one input uses one kind.
 
 The readers take lines of *bytes* and never raise on bad input: each record
 comes out either as a :class:`Record` or as a :class:`BadRecord` naming its
@@ -25,7 +32,10 @@ import json
 import math
 import re
 from dataclasses import dataclass
+from datetime import datetime, timezone
 from typing import Any, Iterable, Iterator, Mapping
+
+from .input_spec import InputSpec
 
 __all__ = [
     "Record",
@@ -42,7 +52,11 @@ FORMATS = ("csv", "jsonl")
 # ASCII digits only: Python's float() also reads full-width and other Unicode digits ("４１.5")
 _NUMBER = re.compile(r"^[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?$")
 _NAN = {"nan", "+nan", "-nan"}
-_CSV_HEADERS = (("time", "sensor", "value"), ("time", "sensor", "values"))
+# an ISO 8601 date and time in the extended format: 2026-07-01T12:00:00.5Z, 2026-07-01 12:00+02:00, 2026-07-01
+_ISO_TIME = re.compile(
+    r"^[0-9]{4}-[0-9]{2}-[0-9]{2}(?:[T ][0-9]{2}(?::[0-9]{2}(?::[0-9]{2}(?:[.,][0-9]+)?)?)?(?:Z|[+-][0-9]{2}(?::?[0-9]{2})?)?)?$"
+)
+_DEFAULT_SPEC = InputSpec()
 _INF = {"inf", "infinity"}
 _TIME_FINITE = "a time must be a finite number of seconds"
 _JSON_KEYS = ("time", "sensor", "value", "values")
@@ -159,6 +173,60 @@ def _json_number(v: Any, field: str, *, allow_missing: bool) -> float:
     return f
 
 
+class _Clock:
+    """Reads the times of one input: seconds, or ISO 8601 date-times as seconds after the origin.
+
+    One input uses one kind of time: the first good time decides, and a time
+    of the other kind later is a bad record naming the line that decided.
+    Naive ISO times (no offset, no ``Z``) are read as UTC.
+    """
+
+    def __init__(self, origin: datetime):
+        self.origin = origin
+        self.kind: str | None = None
+        self.since = 0
+
+    def _agree(self, kind: str, lineno: int) -> None:
+        if self.kind is None:
+            self.kind, self.since = kind, lineno
+        elif kind != self.kind:
+            other = "numbers of seconds" if self.kind == "number" else "ISO 8601 date-times"
+            this = "a number of seconds" if kind == "number" else "an ISO 8601 date-time"
+            raise _Bad("time", f"{this}, but the times of this input are {other} (since line {self.since}); use one kind in one input")
+
+    def _iso(self, text: str) -> float:
+        try:
+            when = datetime.fromisoformat(text)
+        except ValueError as e:
+            raise _Bad("time", f"not a valid ISO 8601 time: {_show(text)} ({e})") from None
+        if when.tzinfo is None:
+            when = when.replace(tzinfo=timezone.utc)
+        return (when - self.origin).total_seconds()
+
+    def text(self, text: str, lineno: int) -> float:
+        """A time from CSV text."""
+        t = text.strip()
+        if _ISO_TIME.match(t):
+            value = self._iso(t)
+            self._agree("iso", lineno)
+            return value
+        value = _parse_time_text(t)
+        self._agree("number", lineno)
+        return value
+
+    def json(self, v: Any, lineno: int) -> float:
+        """A time from a JSON value: a number, or an ISO 8601 string."""
+        if isinstance(v, str):
+            if not _ISO_TIME.match(v.strip()):
+                raise _Bad("time", f"expected a number or an ISO 8601 time, got {_json_type(v)}")
+            value = self._iso(v.strip())
+            self._agree("iso", lineno)
+            return value
+        value = _json_number(v, "time", allow_missing=False)
+        self._agree("number", lineno)
+        return value
+
+
 def _json_type(v: Any) -> str:
     if isinstance(v, bool):
         return "a boolean"
@@ -201,13 +269,22 @@ def _terminated(raw: bytes | str) -> bool:
     return raw.endswith(b"\n" if isinstance(raw, bytes) else "\n")
 
 
-def read_csv(lines: Iterable[bytes | str], unterminated: str = "accept") -> Iterator[Record | BadRecord]:
+def read_csv(
+    lines: Iterable[bytes | str], unterminated: str = "accept", layout: InputSpec | None = None
+) -> Iterator[Record | BadRecord]:
     """Records from CSV lines (bytes or text, newlines included or not).
 
     The first line that is neither blank nor a ``#`` comment must be the
-    header ``time,sensor,value`` (or ``values``); an input without one (an
-    empty file, or only blank and comment lines) is a bad ``header``.  Never
-    raises on bad input: every problem comes out as a :class:`BadRecord`.
+    header: ``time,sensor`` and the value columns (``value``, or one name
+    per component such as ``x,y``), or the columns ``layout`` names (see
+    :class:`~pursuit.io.input_spec.InputSpec`; a wide layout gives one record
+    per sensor with a value in the row).  A header that does not fit is one
+    bad ``header`` naming the columns expected and found, and reading stops
+    there (every row would be misread).  An input without a header (an empty
+    file, or only blank and comment lines) is a bad ``header`` too.  Times are
+    numbers of seconds or ISO 8601 date-times (seconds after
+    ``layout.time_origin``).  Never raises on bad input: every problem comes
+    out as a :class:`BadRecord`.
 
     ``unterminated`` says what a line without a newline is (lines read from
     a file: the last one, when the writer stopped before its newline):
@@ -219,7 +296,10 @@ def read_csv(lines: Iterable[bytes | str], unterminated: str = "accept") -> Iter
     """
     if unterminated not in UNTERMINATED:
         raise ValueError(f"unterminated: must be one of {', '.join(UNTERMINATED)}, got {unterminated!r}")
-    header_seen = content_seen = False
+    spec = layout or _DEFAULT_SPEC
+    clock = _Clock(spec.time_origin)
+    columns: _Columns | None = None
+    content_seen = False
     lineno = 0
     for lineno, raw in enumerate(lines, start=1):
         cut = unterminated != "accept" and not _terminated(raw)
@@ -231,19 +311,24 @@ def read_csv(lines: Iterable[bytes | str], unterminated: str = "accept") -> Iter
             if cut and unterminated == "reject":
                 raise _Bad("record", _CUT_MESSAGE)
             fields = _split_csv(text)
-            if not header_seen:
-                header_seen = True
-                names = tuple(f.strip().lower() for f in fields)
-                if names not in _CSV_HEADERS:
-                    raise _Bad("header", f"expected 'time,sensor,value' as the first line, got {_show(text, 60)}")
+            if columns is None:
+                try:
+                    columns = _Columns.from_header(fields, spec)
+                except _Bad as e:
+                    yield BadRecord(lineno, e.field, e.message)
+                    return  # every row would be misread: one error, not one per row
                 continue
-            yield _csv_record(lineno, fields)
+            yield from columns.records(lineno, fields, clock)
         except _Bad as e:
             content_seen = True
             yield BadRecord(lineno, e.field, e.message + (_CUT_HINT if cut and unterminated == "hint" else ""))
     if not content_seen:  # nothing but blank and comment lines: no header to read
         what = "the input is empty" if lineno == 0 else "the input has only blank and comment lines"
-        yield BadRecord(max(lineno, 1), "header", f"missing: {what} (expected the header 'time,sensor,value')")
+        if spec.columns is None:
+            header = f"{spec.time_column},{spec.sensor_column},value"
+        else:
+            header = ",".join([spec.time_column, *(c for cols in spec.columns.values() for c in cols)])
+        yield BadRecord(max(lineno, 1), "header", f"missing: {what} (expected the header '{header}')")
 
 
 def _split_csv(text: str) -> list[str]:
@@ -254,15 +339,76 @@ def _split_csv(text: str) -> list[str]:
     return rows[0] if rows else []
 
 
-def _csv_record(lineno: int, fields: list[str]) -> Record:
-    if len(fields) < 3:
-        raise _Bad("record", f"expected at least 3 fields (time, sensor, value), got {len(fields)}")
-    time = _parse_time_text(fields[0])
-    sensor = fields[1].strip()
-    if not sensor:
-        raise _Bad("sensor", "missing")
-    values = tuple(_parse_value_text(f, "value") for f in fields[2:])
-    return Record(lineno, time, sensor, values)
+@dataclass(frozen=True)
+class _Columns:
+    """Where a CSV's time, sensor and values are, from its header.
+
+    ``sensor`` is the sensor column's index (every other column is a value,
+    in order, including fields beyond the header), or None for a wide file
+    whose ``wide`` entries give each sensor's value columns.
+    """
+
+    names: tuple[str, ...]
+    time: int
+    sensor: int | None
+    wide: tuple[tuple[str, tuple[int, ...]], ...] = ()
+
+    @staticmethod
+    def from_header(fields: list[str], spec: InputSpec) -> "_Columns":
+        names = tuple(f.strip() for f in fields)
+        lower = [n.lower() for n in names]
+        found = ",".join(names)
+        found = found if len(found) <= 80 else found[:76] + "..."
+        hint = "" if spec.columns is not None else (
+            "; a file with no sensor column (one column per quantity) needs [input] columns in the model file (docs/track.md)"
+        )
+        if spec.columns is None:
+            wanted = [spec.time_column, spec.sensor_column]
+            expected = f"{spec.time_column},{spec.sensor_column} and the value column(s) (value, or one per component such as x,y)"
+        else:
+            wanted = [spec.time_column, *(c for cols in spec.columns.values() for c in cols)]
+            expected = ",".join(wanted) + " (from [input] in the model file; other columns are ignored)"
+        missing = [w for w in wanted if w.lower() not in lower]
+        twice = [w for w in wanted if lower.count(w.lower()) > 1]
+        if missing or twice or (spec.columns is None and len(names) < 3):
+            if missing:
+                problem = f"missing {','.join(missing)}"
+            else:
+                problem = f"{','.join(twice)} given twice" if twice else "no value column"
+            raise _Bad("header", f"expected the columns {expected}; found {found!r} ({problem}){hint}")
+        index = {w: lower.index(w.lower()) for w in wanted}
+        if spec.columns is None:
+            return _Columns(names, index[spec.time_column], index[spec.sensor_column])
+        wide = tuple((sensor, tuple(index[c] for c in cols)) for sensor, cols in spec.columns.items())
+        return _Columns(names, index[spec.time_column], None, wide)
+
+    def records(self, lineno: int, fields: list[str], clock: _Clock) -> Iterator[Record]:
+        """The records of one data row (a wide row: one per sensor with a value, or a prediction request)."""
+        if self.sensor is None:
+            yield from self._wide(lineno, fields, clock)
+            return
+        need = max(self.time, self.sensor) + 1
+        need = need + 1 if need == 2 else need  # a value column after time and sensor
+        if len(fields) < need:
+            what = ", ".join(self.names[i] if i in (self.time, self.sensor) else "value" for i in range(need))
+            raise _Bad("record", f"expected at least {need} fields ({what}), got {len(fields)}")
+        time = clock.text(fields[self.time], lineno)
+        sensor = fields[self.sensor].strip()
+        if not sensor:
+            raise _Bad("sensor", "missing")
+        values = tuple(_parse_value_text(f, "value") for i, f in enumerate(fields) if i not in (self.time, self.sensor))
+        yield Record(lineno, time, sensor, values)
+
+    def _wide(self, lineno: int, fields: list[str], clock: _Clock) -> Iterator[Record]:
+        if len(fields) != len(self.names):
+            raise _Bad("record", f"expected {len(self.names)} fields as in the header, got {len(fields)}")
+        time = clock.text(fields[self.time], lineno)
+        found = []
+        for sensor, idx in self.wide:
+            values = tuple(_parse_value_text(fields[i], self.names[i]) for i in idx)
+            if not all(math.isnan(v) for v in values):  # a sensor with no value in the row did not report
+                found.append(Record(lineno, time, sensor, values))
+        yield from found or [Record(lineno, time, None, ())]
 
 
 # --------------------------------------------------------------------------
@@ -285,14 +431,20 @@ def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     return obj
 
 
-def read_jsonl(lines: Iterable[bytes | str], unterminated: str = "accept") -> Iterator[Record | BadRecord]:
+def read_jsonl(
+    lines: Iterable[bytes | str], unterminated: str = "accept", layout: InputSpec | None = None
+) -> Iterator[Record | BadRecord]:
     """Records from JSON Lines (one object per line; blank lines ignored).
 
     Never raises on bad input: every problem comes out as a
-    :class:`BadRecord`.  ``unterminated`` as in :func:`read_csv`.
+    :class:`BadRecord`.  ``unterminated`` as in :func:`read_csv`; a time is
+    a number of seconds or an ISO 8601 string (seconds after
+    ``layout.time_origin``, the Unix epoch by default); the column names of
+    ``layout`` apply to CSV only.
     """
     if unterminated not in UNTERMINATED:
         raise ValueError(f"unterminated: must be one of {', '.join(UNTERMINATED)}, got {unterminated!r}")
+    clock = _Clock((layout or _DEFAULT_SPEC).time_origin)
     for lineno, raw in enumerate(lines, start=1):
         cut = unterminated != "accept" and not _terminated(raw)
         try:
@@ -307,12 +459,12 @@ def read_jsonl(lines: Iterable[bytes | str], unterminated: str = "accept") -> It
                 raise _Bad("record", f"not valid JSON ({e.msg} at column {e.colno})") from None
             except (ValueError, RecursionError) as e:  # huge integers, absurd nesting
                 raise _Bad("record", f"not valid JSON ({type(e).__name__})") from None
-            yield _json_record(lineno, obj)
+            yield _json_record(lineno, obj, clock)
         except _Bad as e:
             yield BadRecord(lineno, e.field, e.message + (_CUT_HINT if cut and unterminated == "hint" else ""))
 
 
-def _json_record(lineno: int, obj: Any) -> Record:
+def _json_record(lineno: int, obj: Any, clock: _Clock) -> Record:
     if not isinstance(obj, dict):
         raise _Bad("record", f'expected an object like {{"time": 1.0, "sensor": "A", "value": 2.5}}, got {_json_type(obj)}')
     for key in obj:
@@ -321,7 +473,7 @@ def _json_record(lineno: int, obj: Any) -> Record:
             raise _Bad(name, f"unknown key (known: {', '.join(_JSON_KEYS)})")
     if "time" not in obj:
         raise _Bad("time", "missing")
-    time = _json_number(obj["time"], "time", allow_missing=False)
+    time = clock.json(obj["time"], lineno)
     has_value = "value" in obj or "values" in obj
     if "value" in obj and "values" in obj:
         raise _Bad("values", "give either value or values, not both")
@@ -348,12 +500,14 @@ def _json_record(lineno: int, obj: Any) -> Record:
     return Record(lineno, time, sensor, values)
 
 
-def read_records(lines: Iterable[bytes | str], fmt: str, unterminated: str = "accept") -> Iterator[Record | BadRecord]:
-    """Records in format ``fmt`` (``"csv"`` or ``"jsonl"``); ``unterminated`` as in :func:`read_csv`."""
+def read_records(
+    lines: Iterable[bytes | str], fmt: str, unterminated: str = "accept", layout: InputSpec | None = None
+) -> Iterator[Record | BadRecord]:
+    """Records in format ``fmt`` (``"csv"`` or ``"jsonl"``); ``unterminated`` and ``layout`` as in :func:`read_csv`."""
     if fmt == "csv":
-        return read_csv(lines, unterminated)
+        return read_csv(lines, unterminated, layout)
     if fmt == "jsonl":
-        return read_jsonl(lines, unterminated)
+        return read_jsonl(lines, unterminated, layout)
     raise ValueError(f"format: must be one of {', '.join(FORMATS)}, got {fmt!r}")
 
 

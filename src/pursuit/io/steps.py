@@ -18,12 +18,17 @@ Records that arrive out of time order are handled by a policy:
 ``error``
     such a record is a bad record.
 
-Whatever the policy, a record at or before the prior's time, and a second
-record of one sensor at one time, are bad records.
+Whatever the policy, a record at or before the prior's time, a second
+record of one sensor at one time, and a record more than ``max_gap`` after
+the last time reached (a corrupt clock far more likely than a pause the
+model could predict across; see :mod:`pursuit.io.input_spec`) are bad
+records.  The last time reached stays where it was, so the records after
+such a one go on.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Iterable, Iterator, Mapping
 
@@ -89,6 +94,7 @@ def assemble_steps(
     after: float | None = None,
     policy: str = "error",
     stop_at_bad: bool = False,
+    max_gap: float = math.inf,
 ) -> Iterator[Step | BadRecord | Dropped]:
     """Group records into steps, lazily (one step of look-ahead).
 
@@ -110,6 +116,10 @@ def assemble_steps(
     stop_at_bad
         End at the first bad record, as if the input ended just before it:
         the step being assembled is yielded, then the bad record.
+    max_gap
+        A record more than this many seconds after the last time reached
+        (the step being assembled, else ``after``) is a bad record.  The
+        first record has no time to be measured from when ``after`` is None.
 
     Yields
     ------
@@ -123,6 +133,8 @@ def assemble_steps(
     pending_time: float | None = None
     for item in items:
         bad = _problem(item, sensors, after, pending, pending_time, policy)
+        if bad is None:
+            bad = _too_far(item, pending[0].line if pending else None, pending_time if pending else after, max_gap)
         if isinstance(bad, Dropped):
             yield bad
             continue
@@ -166,6 +178,19 @@ def _problem(item, sensors, after, pending, pending_time, policy) -> BadRecord |
     return None
 
 
+def _too_far(rec: Record, line: int | None, reached: float | None, max_gap: float) -> BadRecord | None:
+    """A bad record when ``rec`` comes more than ``max_gap`` after the time ``reached`` (of input ``line``)."""
+    if reached is None or not rec.time - reached > max_gap:
+        return None
+    where = f"time {reached!r} (line {line})" if line is not None else f"the prior's time {reached!r}"
+    return BadRecord(
+        rec.line,
+        "time",
+        f"{rec.time!r} is {rec.time - reached:.6g} s after {where}, more than the largest gap the model predicts "
+        f"across (input.max_gap = {max_gap:.6g} s): a corrupt time?",
+    )
+
+
 def _make_step(records: list[Record], sensors: Mapping[str, object], m: int) -> Step:
     z = np.full(m, np.nan)
     for r in records:
@@ -174,6 +199,6 @@ def _make_step(records: list[Record], sensors: Mapping[str, object], m: int) -> 
     return Step(
         time=records[0].time,
         z=z,
-        lines=tuple(r.line for r in records),
+        lines=tuple(dict.fromkeys(r.line for r in records)),  # a wide CSV row gives several records
         sensors=tuple(r.sensor for r in records if r.sensor is not None),
     )

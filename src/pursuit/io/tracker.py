@@ -19,6 +19,7 @@ from typing import Iterable, Iterator
 import numpy as np
 
 from ..rng import RunStreams
+from .initiate import initiate
 from .model import TrackModel
 from .records import BadRecord, Record
 from .steps import Dropped, Step, assemble_steps, sort_records
@@ -48,6 +49,8 @@ class Estimate:
         was measured.
     lines
         Input lines of the step's records.
+    cov
+        ``(n, n)`` covariance of the estimate.
     """
 
     time: float
@@ -57,6 +60,7 @@ class Estimate:
     dof: int
     flags: tuple[str, ...]
     lines: tuple[int, ...]
+    cov: np.ndarray | None = None
 
 
 class StepRefused(Exception):
@@ -83,6 +87,8 @@ class Tracker:
     """
 
     def __init__(self, model: TrackModel):
+        if model.prior is None:
+            raise ValueError("model: its prior is to come from the measurements; run it with stream_records or track_records")
         self.model = model
         rng = RunStreams([np.random.default_rng(model.seed)])
         self.state = model.filter.init(model.prior, batch=(1,), rng=rng)
@@ -139,7 +145,14 @@ class Tracker:
             dof=dof,
             flags=tuple(flags),
             lines=step.lines,
+            cov=np.asarray(state.cov, dtype=float)[0],
         )
+
+
+def _initiation_estimate(step: Step, g, flags: tuple[str, ...]) -> Estimate:
+    """The output record of a step used to start the track (no filter update, no NIS)."""
+    measured = int(np.count_nonzero(np.isfinite(step.z)))
+    return Estimate(step.time, g.mean, np.diagonal(g.cov).copy(), float("nan"), measured, flags, step.lines, g.cov)
 
 
 def _describe(e: Exception) -> str:
@@ -220,11 +233,21 @@ def stream_records(
     With ``stop_at_bad`` the input ends at the first bad record: the
     records before it are filtered, then the bad record is yielded last.
     """
-    tracker = Tracker(model)
     policy = "error" if out_of_order == "sort" else out_of_order
     steps = assemble_steps(
-        items, model.sensors, model.measurement_dim, after=model.prior_time, policy=policy, stop_at_bad=stop_at_bad
+        items,
+        model.sensors,
+        model.measurement_dim,
+        after=model.prior_time,
+        policy=policy,
+        stop_at_bad=stop_at_bad,
+        max_gap=model.input.max_gap,
     )
+    if model.prior is None:  # [prior] from = "measurements": the first steps that fix a position start the track
+        model = yield from initiate(steps, model, _initiation_estimate)
+        if model is None:
+            return
+    tracker = Tracker(model)
     for event in steps:
         if isinstance(event, Step):
             try:
