@@ -32,6 +32,9 @@ ROOT = Path(__file__).resolve().parents[2]
 MODEL = ROOT / "examples" / "wsn-range.toml"
 SENSORS = ("A1", "A2", "A3", "A4")
 VALID = 1e9  # the default `valid` range is [-1e9, 1e9]
+PRIOR_TIME = 0.0  # [prior] time of examples/wsn-range.toml
+# docs/track.md "Gaps": the default max_gap of a discrete-noise cv model is (4·10¹⁸/q)^(1/4) s; q = 0.01 here.
+MAX_GAP = (4e18 / 0.01) ** 0.25
 
 # A number as docs/track.md reads it: ASCII digits, optional sign, point and exponent.
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
@@ -249,11 +252,16 @@ def expected(case: TrackCase):
         keyed = [(ln, line, v) for ln, line, v in verdicts if v not in (None, "bad")]
         keyed.sort(key=lambda p: p[2][1] if p[2][0] == "predict" else p[2][0])
         seen, bad = set(), {ln for ln, _, v in verdicts if v == "bad"}
-        kept = []
+        kept, reached = [], PRIOR_TIME
         for ln, line, v in keyed:
+            t = v[1] if v[0] == "predict" else v[0]
             if v[0] != "predict" and (v[0], v[1]) in seen:
                 bad.add(ln)
                 continue
+            if t - reached > MAX_GAP:  # a corrupt clock, not a pause; the time reached stays
+                bad.add(ln)
+                continue
+            reached = t
             if v[0] != "predict":
                 seen.add((v[0], v[1]))
             kept.append(line)
@@ -270,6 +278,11 @@ def expected(case: TrackCase):
         t = v[1] if v[0] == "predict" else v[0]
         if t < current:
             continue  # dropped with a warning
+        if t - (current if current > -math.inf else PRIOR_TIME) > MAX_GAP:
+            bad.add(ln)  # more than max_gap after the time reached, which stays
+            if not case.skip_bad:
+                break
+            continue
         if t > current:
             current, sensors = t, set()
         if v[0] != "predict":
