@@ -216,3 +216,16 @@ type = "ekf"
     final = res.estimates[-1]
     assert abs(final.mean[0] - 20.0) < 5 * math.sqrt(final.var[0]) and abs(final.mean[2] - 20.0) < 5 * math.sqrt(final.var[2])
     assert [e.dof for e in res.estimates[:3]] == [3, 3, 1]
+
+
+@pytest.mark.parametrize("policy", ["drop", "error"])
+def test_a_late_record_at_or_before_the_prior_time_is_bad_whatever_the_policy(wsn_model_path, policy):
+    # docs/track.md: "Whatever the policy, a record at or before [prior] time ... [is a] bad record";
+    # found by tests/fuzz: in a stream it was dropped (drop) or called out of order (error) once a step was pending.
+    model = load_track_model(wsn_model_path)
+    rows = [(1.0, "A1", 40.0), (0.0, "A2", 40.0), (2.0, "A1", 41.0), (-3.0, "A3", 40.0)]
+    events = list(stream_records(_records(csv_text(rows)), model, out_of_order=policy))
+    bad = [e for e in events if not isinstance(e, (Dropped,)) and hasattr(e, "field")]
+    assert [(b.line, b.field) for b in bad] == [(3, "time"), (5, "time")]
+    assert all("not after the prior's time 0.0" in b.message for b in bad)
+    assert not any(isinstance(e, Dropped) for e in events)

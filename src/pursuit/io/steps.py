@@ -149,7 +149,6 @@ def assemble_steps(
         rec = item
         if pending_time is not None and rec.time > pending_time:
             yield _make_step(pending, sensors, measurement_dim)
-            after = pending_time
             pending = []
         pending.append(rec)
         pending_time = rec.time
@@ -164,7 +163,8 @@ def _problem(item, sensors, after, pending, pending_time, policy) -> BadRecord |
     rec = check_record(item, sensors)
     if isinstance(rec, BadRecord):
         return rec
-    if after is not None and rec.time <= after and not pending:
+    # Before the late-record policy: at or before the prior's time is bad whatever the policy.
+    if after is not None and rec.time <= after:
         return BadRecord(rec.line, "time", f"{rec.time!r} is not after the prior's time {after!r}")
     if pending_time is not None and rec.time < pending_time:
         message = f"{rec.time!r} is earlier than time {pending_time!r} already reached (line {pending[0].line})"
