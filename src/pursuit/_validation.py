@@ -22,6 +22,7 @@ __all__ = [
     "in_range",
     "no_infinite_measurement",
     "no_infinite_measurements",
+    "MAX_MEASUREMENT",
     "model_dim",
     "measurement_for_step",
     "prior_of_size",
@@ -142,15 +143,39 @@ def _number(name: str, value) -> float:
     return v
 
 
+MAX_MEASUREMENT = 2.0**500
+"""Largest accepted measurement magnitude (≈ 3.3e150).
+
+The filters square measurements and what they move the state to (NIS is
+νᵀ S⁻¹ ν, a range is √(Δx² + Δy²)); float64 overflows above 2¹⁰²⁴, so a
+value's square must stay below that with room to spare: 2⁵⁰⁰ squared is
+2¹⁰⁰⁰, leaving a factor 2²⁴ (1.7e7) for sums of squares over the
+components and products with gains.  A 1e300 measurement used to turn the
+EKF's estimate into NaN from that step on, with nothing flagged."""
+
+
 def no_infinite_measurement(z: np.ndarray, k: int) -> None:
-    """Raise ``ValueError`` naming step ``k`` if the measurement ``z`` holds an infinity (a missing value is NaN)."""
+    """Raise ``ValueError`` naming step ``k`` if the measurement ``z`` holds an infinity or a value beyond ±:data:`MAX_MEASUREMENT`.
+
+    A missing value is NaN and passes.
+    """
     if np.isinf(z).any():
         raise ValueError(f"step {k}: measurement contains infinity (use NaN for a missing value)")
+    with np.errstate(invalid="ignore"):
+        huge = np.abs(z) > MAX_MEASUREMENT
+    if huge.any():
+        where = np.unravel_index(int(np.argmax(huge)), np.shape(z))
+        value = float(np.asarray(z)[where])
+        raise ValueError(
+            f"step {k}: measurement z{list(map(int, where))} = {value:.6g} is beyond ±2^500 ≈ {MAX_MEASUREMENT:.3g}, "
+            "the largest magnitude the filters can square without overflowing float64"
+        )
 
 
 def no_infinite_measurements(zs: np.ndarray) -> None:
-    """:func:`no_infinite_measurement` for a whole sequence ``(K, ...)``, naming the first step (from 1) with an infinity."""
-    bad = np.isinf(zs).any(axis=tuple(range(1, zs.ndim)))
+    """:func:`no_infinite_measurement` for a whole sequence ``(K, ...)``, naming the first step (from 1) with a bad value."""
+    with np.errstate(invalid="ignore"):
+        bad = (np.abs(zs) > MAX_MEASUREMENT).any(axis=tuple(range(1, zs.ndim)))  # ∞ > MAX too
     if bad.any():
         first = int(np.argmax(bad))
         no_infinite_measurement(zs[first], first + 1)
