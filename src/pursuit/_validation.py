@@ -27,6 +27,7 @@ __all__ = [
     "measurement_for_step",
     "prior_of_size",
     "time_step",
+    "MAX_TIME_STEP",
 ]
 
 
@@ -221,11 +222,22 @@ def prior_of_size(prior_dim: int, n: int | None, model) -> None:
         )
 
 
+MAX_TIME_STEP = 2.0**200
+"""Largest accepted ``dt`` (≈ 1.6e60 s).
+
+The motion models raise ``dt`` to powers up to the fifth (the constant-
+acceleration model's continuous white-noise Q has dt⁵/20); 2²⁰⁰ to the fifth
+is 2¹⁰⁰⁰, leaving a factor 2²⁴ below float64's overflow at 2¹⁰²⁴.  A
+``dt`` of 1e300 raised Python's ``OverflowError`` ("Numerical result out of
+range") inside the models."""
+
+
 def time_step(dt, k: int) -> float | None:
-    """A step's ``dt`` checked: ``None`` (the model's own) or a finite number of seconds > 0.
+    """A step's ``dt`` checked: ``None`` (the model's own) or a finite number of seconds in (0, 2²⁰⁰].
 
     A negative, zero, NaN or infinite ``dt`` raises ``ValueError`` naming
-    step ``k`` (a NaN used to surface as "covariance is not symmetric").
+    step ``k`` (a NaN used to surface as "covariance is not symmetric"), and
+    so does one beyond :data:`MAX_TIME_STEP`.
     """
     if dt is None:
         return None
@@ -234,4 +246,9 @@ def time_step(dt, k: int) -> float | None:
     v = float(dt)
     if not (np.isfinite(v) and v > 0):
         raise ValueError(f"step {k}: dt: must be a finite time step > 0 s, got {dt!r}")
+    if v > MAX_TIME_STEP:
+        raise ValueError(
+            f"step {k}: dt: {v:g} s is beyond 2^200 ≈ {MAX_TIME_STEP:.3g} s, the longest step whose fifth power "
+            "(the motion models' process noise) float64 holds"
+        )
     return v

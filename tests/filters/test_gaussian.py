@@ -274,3 +274,18 @@ def test_a_large_prior_within_the_limit_gives_positive_definite_covariances_and_
     assert np.all(np.abs(err) < 5 * sd)  # consistent with its covariance
     usual_err = np.abs(usual.mean[-1] - sim.truth[-1])[:, pos]
     assert np.abs(err).max() < 2 * usual_err.max()  # as close as from the usual prior (a different prior: not equal)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+@pytest.mark.parametrize("cls", [*_GAUSSIAN, pu.BootstrapParticleFilter], ids=lambda c: c.__name__)
+def test_a_time_step_too_long_for_the_motion_model_is_refused_naming_the_step(cls, backend):
+    # dt = 1e300 raised OverflowError ("Numerical result out of range") from every filter and backend
+    pytest.importorskip("numba") if backend == "numba" else None
+    scenario = _scenario_for(cls, 3)
+    kw = {"particles": 50} if cls is pu.BootstrapParticleFilter else {}
+    filt = cls(scenario.motion, scenario.measurement, backend=backend, **kw)
+    state = filt.init(pu.Gaussian(scenario.x0, scenario.P0), batch=(2,), rng=np.random.default_rng(0))
+    z = scenario.simulate(np.random.default_rng(1), 2).measurements[0]
+    for zk in (z, np.full_like(z, np.nan)):
+        with pytest.raises(ValueError, match=r"^step 1: dt: 1e\+300 s is beyond 2\^200"):
+            filt.step(state, zk, dt=1e300)

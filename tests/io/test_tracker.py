@@ -148,7 +148,8 @@ def test_a_step_that_would_overflow_the_filter_is_refused_and_the_filter_goes_on
     assert [(p.line, p.field) for p in res.problems] == [(3, "time")]
     assert res.problems[0].message == (
         "rejected at time 1e+300: 1e+300 s after the previous step at 1.0 is a gap the filter cannot "
-        "predict across (the filter failed: a number overflows)"
+        "predict across (the filter failed: ValueError: step 2: dt: 1e+300 s is beyond 2^200 ≈ 1.61e+60 s, "
+        "the longest step whose fifth power (the motion models' process noise) float64 holds)"
     )
     assert len(res.estimates) == 1
     # streaming: the same refusal, then the next record is filtered from the last good state
