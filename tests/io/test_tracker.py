@@ -214,3 +214,25 @@ type = "ekf"
     final = res.estimates[-1]
     assert abs(final.mean[0] - 20.0) < 5 * math.sqrt(final.var[0]) and abs(final.mean[2] - 20.0) < 5 * math.sqrt(final.var[2])
     assert [e.dof for e in res.estimates[:3]] == [3, 3, 1]
+
+
+def test_a_step_whose_nis_comes_out_negative_is_refused_not_written(wsn_model_path):
+    # A prior covariance of 1e20 used to reach the output as a negative NIS; the loader refuses that
+    # prior now, and the tracker refuses any step whose NIS round-off made negative.
+    import dataclasses
+
+    model = load_track_model(wsn_model_path)
+
+    class NegativeNIS:  # the model's EKF, with the round-off of an update that lost R
+        def init(self, *args, **kwargs):
+            return model.filter.init(*args, **kwargs)
+
+        def step(self, *args, **kwargs):
+            state, info = model.filter.step(*args, **kwargs)
+            return state, {**info, "nis": np.where(np.isnan(info["nis"]), np.nan, -1e-5)}  # NaN: nothing measured
+
+    bad = dataclasses.replace(model, filter=NegativeNIS())
+    res = track_records(_records(csv_text([(1.0, "A1", 40.0), (2.0, "A1", 41.0)])), bad)
+    assert res.estimates == []
+    assert [(p.line, p.field) for p in res.problems] == [(2, "record"), (3, "record")]
+    assert "round-off made its NIS negative" in res.problems[0].message
