@@ -58,3 +58,29 @@ def test_a_positive_time_step_passes_and_none_means_the_models_own():
     from pursuit._validation import time_step
 
     assert time_step(None, 1) is None and time_step(2, 1) == 2.0 and time_step(np.float32(0.5), 1) == 0.5
+
+
+def test_a_measurement_too_large_to_square_names_its_step_component_and_the_limit():
+    from pursuit._validation import MAX_MEASUREMENT
+
+    assert np.isfinite(MAX_MEASUREMENT**2 * 2.0**23)  # the documented headroom: squares and sums of them stay finite
+    no_infinite_measurement(np.array([MAX_MEASUREMENT, -MAX_MEASUREMENT, np.nan]), 2)  # the limit itself is accepted
+    with pytest.raises(ValueError, match=r"^step 7: measurement z\[1\] = -1e\+300 is beyond ±2\^500 ≈ 3\.27e\+150"):
+        no_infinite_measurement(np.array([1.0, -1e300]), 7)
+    zs = np.zeros((4, 3, 2))
+    zs[2, 1, 0] = 1e200
+    with pytest.raises(ValueError, match=r"^step 3: measurement z\[1, 0\] = 1e\+200 is beyond"):
+        no_infinite_measurements(zs)
+
+
+def test_a_time_step_whose_fifth_power_overflows_names_the_step_and_the_limit():
+    # dt = 1e300 raised Python's OverflowError ("Numerical result out of range") inside the motion models
+    from pursuit._validation import MAX_TIME_STEP, time_step
+    from pursuit.models import ConstantAcceleration
+
+    with pytest.raises(ValueError, match=r"^step 4: dt: 1e\+300 s is beyond 2\^200 ≈ 1\.61e\+60 s"):
+        time_step(1e300, 4)
+    assert time_step(MAX_TIME_STEP, 4) == MAX_TIME_STEP
+    # at the limit the largest power the models take (dt⁵ of the continuous-noise CA model) is finite
+    Q = ConstantAcceleration(ndim=1, q=1.0, noise="continuous").cov(1, MAX_TIME_STEP)
+    assert np.all(np.isfinite(Q))

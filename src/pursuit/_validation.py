@@ -22,10 +22,12 @@ __all__ = [
     "in_range",
     "no_infinite_measurement",
     "no_infinite_measurements",
+    "MAX_MEASUREMENT",
     "model_dim",
     "measurement_for_step",
     "prior_of_size",
     "time_step",
+    "MAX_TIME_STEP",
 ]
 
 
@@ -142,15 +144,39 @@ def _number(name: str, value) -> float:
     return v
 
 
+MAX_MEASUREMENT = 2.0**500
+"""Largest accepted measurement magnitude (≈ 3.3e150).
+
+The filters square measurements and what they move the state to (NIS is
+νᵀ S⁻¹ ν, a range is √(Δx² + Δy²)); float64 overflows above 2¹⁰²⁴, so a
+value's square must stay below that with room to spare: 2⁵⁰⁰ squared is
+2¹⁰⁰⁰, leaving a factor 2²⁴ (1.7e7) for sums of squares over the
+components and products with gains.  A 1e300 measurement used to turn the
+EKF's estimate into NaN from that step on, with nothing flagged."""
+
+
 def no_infinite_measurement(z: np.ndarray, k: int) -> None:
-    """Raise ``ValueError`` naming step ``k`` if the measurement ``z`` holds an infinity (a missing value is NaN)."""
+    """Raise ``ValueError`` naming step ``k`` if the measurement ``z`` holds an infinity or a value beyond ±:data:`MAX_MEASUREMENT`.
+
+    A missing value is NaN and passes.
+    """
     if np.isinf(z).any():
         raise ValueError(f"step {k}: measurement contains infinity (use NaN for a missing value)")
+    with np.errstate(invalid="ignore"):
+        huge = np.abs(z) > MAX_MEASUREMENT
+    if huge.any():
+        where = np.unravel_index(int(np.argmax(huge)), np.shape(z))
+        value = float(np.asarray(z)[where])
+        raise ValueError(
+            f"step {k}: measurement z{list(map(int, where))} = {value:.6g} is beyond ±2^500 ≈ {MAX_MEASUREMENT:.3g}, "
+            "the largest magnitude the filters can square without overflowing float64"
+        )
 
 
 def no_infinite_measurements(zs: np.ndarray) -> None:
-    """:func:`no_infinite_measurement` for a whole sequence ``(K, ...)``, naming the first step (from 1) with an infinity."""
-    bad = np.isinf(zs).any(axis=tuple(range(1, zs.ndim)))
+    """:func:`no_infinite_measurement` for a whole sequence ``(K, ...)``, naming the first step (from 1) with a bad value."""
+    with np.errstate(invalid="ignore"):
+        bad = (np.abs(zs) > MAX_MEASUREMENT).any(axis=tuple(range(1, zs.ndim)))  # ∞ > MAX too
     if bad.any():
         first = int(np.argmax(bad))
         no_infinite_measurement(zs[first], first + 1)
@@ -196,11 +222,22 @@ def prior_of_size(prior_dim: int, n: int | None, model) -> None:
         )
 
 
+MAX_TIME_STEP = 2.0**200
+"""Largest accepted ``dt`` (≈ 1.6e60 s).
+
+The motion models raise ``dt`` to powers up to the fifth (the constant-
+acceleration model's continuous white-noise Q has dt⁵/20); 2²⁰⁰ to the fifth
+is 2¹⁰⁰⁰, leaving a factor 2²⁴ below float64's overflow at 2¹⁰²⁴.  A
+``dt`` of 1e300 raised Python's ``OverflowError`` ("Numerical result out of
+range") inside the models."""
+
+
 def time_step(dt, k: int) -> float | None:
-    """A step's ``dt`` checked: ``None`` (the model's own) or a finite number of seconds > 0.
+    """A step's ``dt`` checked: ``None`` (the model's own) or a finite number of seconds in (0, 2²⁰⁰].
 
     A negative, zero, NaN or infinite ``dt`` raises ``ValueError`` naming
-    step ``k`` (a NaN used to surface as "covariance is not symmetric").
+    step ``k`` (a NaN used to surface as "covariance is not symmetric"), and
+    so does one beyond :data:`MAX_TIME_STEP`.
     """
     if dt is None:
         return None
@@ -209,4 +246,9 @@ def time_step(dt, k: int) -> float | None:
     v = float(dt)
     if not (np.isfinite(v) and v > 0):
         raise ValueError(f"step {k}: dt: must be a finite time step > 0 s, got {dt!r}")
+    if v > MAX_TIME_STEP:
+        raise ValueError(
+            f"step {k}: dt: {v:g} s is beyond 2^200 ≈ {MAX_TIME_STEP:.3g} s, the longest step whose fifth power "
+            "(the motion models' process noise) float64 holds"
+        )
     return v

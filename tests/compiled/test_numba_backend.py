@@ -398,3 +398,22 @@ def test_an_unbatched_run_agrees_with_numpy(filt):
     state, info = fast.step(state, zs[0])
     assert state.mean.shape == (4,) and state.cov.shape == (4, 4) and info["nis"].shape == ()
     _close(state.mean, a.mean[0], "step mean")
+
+
+
+@pytest.mark.parametrize("filt", ["kf", "ekf", "ukf", "ckf"])
+def test_a_prior_covariance_too_large_for_the_noise_is_refused_as_in_numpy(filt):
+    """A 1e20·I prior loses R in S: the compiled filters refuse it as the NumPy ones do (both run paths)."""
+    kind = "linear" if filt == "kf" else "range"
+    mot, zs, prior = _cv_data(MEASUREMENTS[kind], M=3, T=8)
+    huge = pu.Gaussian(prior.mean, 1e20 * np.eye(4))
+    want = r"^prior\.cov: too large for the measurement noise: measurement component \d would have a predicted variance"
+    for backend in ("numpy", "numba"):
+        f = GAUSSIAN[filt](mot, MEASUREMENTS[kind], backend=backend)
+        for sequence in (True, False):
+            with pytest.raises(ValueError, match=want):
+                pu.run(f, zs, huge, sequence=sequence)
+    # within the limit (1e12: H P Hᵀ / R < 2^48) the compiled filter stays positive definite with NIS >= 0
+    b = pu.run(GAUSSIAN[filt](mot, MEASUREMENTS[kind], backend="numba"), zs, pu.Gaussian(prior.mean, 1e12 * np.eye(4)))
+    np.linalg.cholesky(b.cov)
+    assert np.all(np.nan_to_num(b.info["nis"]) >= 0)  # NaN: the step that measures nothing

@@ -127,6 +127,14 @@ def test_infinite_measurement_names_the_step():
         pu.run(filt, zs, prior, rng=run_streams(1, range(3), 1))
 
 
+def test_a_measurement_too_large_to_square_names_the_step():
+    motion, meas, zs, prior = _ungm(M=3, T=6)
+    zs[4, 2, 0] = 1e300
+    filt = pu.BootstrapParticleFilter(motion, meas, particles=50, backend="numba")
+    with pytest.raises(ValueError, match=r"step 5: measurement z\[2, 0\] = 1e\+300 is beyond ±2\^500"):
+        pu.run(filt, zs, prior, rng=run_streams(1, range(3), 1))
+
+
 def test_branch_free_systematic_resampling_matches_the_two_pointer_rule():
     """systematic_fill_cdf picks, for each position (u0 + j)/N, the first particle whose normalised cumulative weight exceeds it."""
     from pursuit._compiled.pf_kernels import systematic_fill_cdf

@@ -126,6 +126,16 @@ def test_infinite_measurement_names_the_step():
         pu.run(filt, zs, pu.Gaussian(x0, np.eye(4)))
 
 
+def test_a_measurement_too_large_to_square_names_the_step():
+    zs, x0 = _data(LINEAR, M=5, T=8)
+    zs[4, 2, 1] = -1e300  # used to run through the compiled sequence into NaN estimates
+    filt = pu.KalmanFilter(MOTION, LINEAR, backend="numba")
+    with pytest.raises(ValueError, match=r"step 5: measurement z\[2, 1\] = -1e\+300 is beyond ±2\^500"):
+        pu.run(filt, zs, pu.Gaussian(x0, np.eye(4)))
+    with pytest.raises(ValueError, match=r"step 5: measurement z\[2, 1\] = -1e\+300 is beyond ±2\^500"):
+        pu.run(filt, zs, pu.Gaussian(x0, np.eye(4)), sequence=False)
+
+
 def test_not_used_where_a_step_needs_python():
     """Gated filters, irregular time steps and stored predictions take the step path (and still agree with NumPy)."""
     zs, x0 = _data(LINEAR, M=10, T=8)

@@ -105,6 +105,18 @@ def test_nan_measurement_means_predict_only(case, scenario):
 
 
 @pytest.mark.parametrize("case,scenario", ALL)
+def test_a_measurement_too_large_to_square_is_refused_naming_its_step(case, scenario):
+    # A 1e300 measurement used to turn the EKF's estimate into NaN from that step on, unflagged.
+    runs = 3
+    sim = _simulate(scenario, runs)
+    zs = sim.measurements[:4].copy()
+    zs[2, 1, 0] = 1e300
+    filt = case.build(scenario)
+    with pytest.raises(ValueError, match=r"^step 3: measurement z\[1, 0\] = 1e\+300 is beyond ±2\^500"):
+        _run(filt, sim, runs, zs=zs)
+
+
+@pytest.mark.parametrize("case,scenario", ALL)
 def test_nis_and_loglik_mean_the_same_thing(case, scenario):
     runs = 3
     sim = _simulate(scenario, runs)

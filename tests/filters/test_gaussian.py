@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 import pursuit as pu
 from pursuit.engine.montecarlo import monte_carlo
 from pursuit.models import ConstantAcceleration, ConstantVelocity, LinearGaussian
-from pursuit.scenarios import LinearCV
+from pursuit.scenarios import LinearCV, WSNRange
 
 
 @dataclass(frozen=True)
@@ -232,3 +232,60 @@ def test_ukf_rejects_impossible_parameters():
 def test_filter_rejects_objects_that_are_not_models():
     with pytest.raises(TypeError, match="f\\(\\)"):
         pu.ExtendedKalmanFilter(object(), LinearGaussian([[1.0]], [[1.0]]))
+
+
+
+_GAUSSIAN = [pu.KalmanFilter, pu.ExtendedKalmanFilter, pu.UnscentedKalmanFilter, pu.CubatureKalmanFilter]
+
+
+def _scenario_for(cls, steps):
+    if cls is pu.KalmanFilter:
+        return LinearCV(ndim=2, steps=steps, sigma=1.0)
+    return WSNRange(steps=steps)
+
+
+@pytest.mark.parametrize("cls", _GAUSSIAN, ids=lambda c: c.__name__)
+def test_a_prior_covariance_too_large_for_the_measurement_noise_is_refused_naming_prior_cov(cls):
+    # A prior covariance of 1e20·I: R = 1 is lost in S = H P Hᵀ + R ≈ 1e20 (float64 keeps 52 bits), and
+    # the filters used to give non-positive-definite covariances and negative NIS, unflagged, and
+    # UKF/CKF estimates 1e7 m off.
+    scenario = _scenario_for(cls, 5)
+    sim = scenario.simulate(np.random.default_rng(3), 4)
+    filt = cls(scenario.motion, scenario.measurement, backend="numpy")
+    huge = pu.Gaussian(sim.prior.mean, 1e20 * np.eye(4))
+    with pytest.raises(ValueError, match=r"^prior\.cov: too large for the measurement noise: measurement component \d would have a "
+                       r"predicted variance H P Hᵀ = \S+, \S+ times its noise variance R = 1, beyond 2\^48 .* scale the prior covariance by at most"):
+        pu.run(filt, sim.measurements, huge)
+
+
+@pytest.mark.parametrize("cls", _GAUSSIAN, ids=lambda c: c.__name__)
+def test_a_large_prior_within_the_limit_gives_positive_definite_covariances_and_nonnegative_nis(cls):
+    # 1e13 m² (H P Hᵀ / R ≤ 1e13 < 2^48): the filters track as from the usual prior.
+    scenario = _scenario_for(cls, 40)
+    sim = scenario.simulate(np.random.default_rng(3), 6)
+    filt = cls(scenario.motion, scenario.measurement, backend="numpy")
+    wide = pu.run(filt, sim.measurements, pu.Gaussian(sim.prior.mean, 1e13 * np.eye(4)))
+    usual = pu.run(filt, sim.measurements, sim.prior)
+    np.linalg.cholesky(wide.cov)  # every covariance of every step and run is positive definite
+    assert np.all(wide.info["nis"] >= 0) and not wide.info["repaired"].any()
+    pos = [0, 2]
+    err = (wide.mean[-1] - sim.truth[-1])[:, pos]
+    sd = np.sqrt(np.diagonal(wide.cov[-1], axis1=-2, axis2=-1)[:, pos])
+    assert np.all(np.abs(err) < 5 * sd)  # consistent with its covariance
+    usual_err = np.abs(usual.mean[-1] - sim.truth[-1])[:, pos]
+    assert np.abs(err).max() < 2 * usual_err.max()  # as close as from the usual prior (a different prior: not equal)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+@pytest.mark.parametrize("cls", [*_GAUSSIAN, pu.BootstrapParticleFilter], ids=lambda c: c.__name__)
+def test_a_time_step_too_long_for_the_motion_model_is_refused_naming_the_step(cls, backend):
+    # dt = 1e300 raised OverflowError ("Numerical result out of range") from every filter and backend
+    pytest.importorskip("numba") if backend == "numba" else None
+    scenario = _scenario_for(cls, 3)
+    kw = {"particles": 50} if cls is pu.BootstrapParticleFilter else {}
+    filt = cls(scenario.motion, scenario.measurement, backend=backend, **kw)
+    state = filt.init(pu.Gaussian(scenario.x0, scenario.P0), batch=(2,), rng=np.random.default_rng(0))
+    z = scenario.simulate(np.random.default_rng(1), 2).measurements[0]
+    for zk in (z, np.full_like(z, np.nan)):
+        with pytest.raises(ValueError, match=r"^step 1: dt: 1e\+300 s is beyond 2\^200"):
+            filt.step(state, zk, dt=1e300)

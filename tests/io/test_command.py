@@ -115,6 +115,31 @@ def test_a_bad_model_file_exits_2_naming_line_and_field(tmp_path, capsys):
     assert f"{bad}:15: sensors[0].sigma: noise standard deviations must be positive" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    "old,new,message",
+    [
+        ("sigma = 1.0          # m", "sigma = 1e200", ":15: sensors[0].sigma: 1e+200 is outside [2^-537, 2^500]"),
+        ("sigma = 1.0          # m", "sigma = 1e-300", ":15: sensors[0].sigma: 1e-300 is outside [2^-537, 2^500]"),
+        ("q = 0.01 ", "q = 1e308 ", ":8: motion.q: the process noise of one 1 s step is too large"),
+        ("mean = [10.0,", "mean = [1e308,", ": prior.mean: 1e+308 is beyond ±2^500"),
+        ("cov = [4.0, 0.25, 4.0, 0.25]", "cov = 1e20", ": prior.cov: too large for the measurement noise"),
+        ('type = "ekf"', 'type = "ekf"\nfading = 1e300', ": filter.fading: 1e+300 is beyond 2^13"),
+    ],
+)
+def test_a_model_file_value_too_large_or_small_for_float64_is_a_bad_model_file_not_bad_records(tmp_path, capsys, old, new, message):
+    # These used to pass the loader and then reject every record ("199 bad records"), or with a prior
+    # covariance of 1e20 write estimates with a negative NIS.
+    bad = tmp_path / "m.toml"
+    text = Path(WSN_MODEL).read_text()
+    assert old in text
+    bad.write_text(text.replace(old, new, 1))
+    out = tmp_path / "est.csv"
+    assert main(["track", WSN_CSV, "-c", str(bad), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"pursuit: error: {bad}:") and message in err and len(err.splitlines()) == 1
+    assert "bad records" not in err and "Traceback" not in err and not out.exists()
+
+
 def test_stdin_is_a_stream_with_jsonl_by_default(capsys, monkeypatch):
     _stdin(monkeypatch, Path(WSN_JSONL).read_bytes())
     assert main(["track", "-", "-c", WSN_MODEL]) == 0
@@ -290,7 +315,8 @@ def test_a_huge_gap_names_the_time_field(tmp_path, capsys):
     err = capsys.readouterr().err.splitlines()
     assert err[0] == (
         f"pursuit track: error: {data}:3: time: rejected at time 1e+300: 1e+300 s after the previous step at 1.0 "
-        "is a gap the filter cannot predict across (the filter failed: a number overflows)"
+        "is a gap the filter cannot predict across (the filter failed: ValueError: step 2: dt: 1e+300 s is beyond 2^200 ≈ 1.61e+60 s, "
+        "the longest step whose fifth power (the motion models' process noise) float64 holds)"
     )
     assert "Numerical result out of range" not in "\n".join(err)
 

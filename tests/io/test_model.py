@@ -175,3 +175,41 @@ def test_bearing_needs_two_dimensions(tmp_path):
     assert model.state_labels == ("x", "vx", "y", "vy", "z", "vz")
     with pytest.raises(ConfigError, match="bearing sensors need a 2-D motion model"):
         _load(tmp_path, text.replace('type = "range"', 'type = "bearing"', 1))
+
+
+# -- magnitudes float64 can square, invert and update with (each used to surface as "199 bad records"
+#    or as "sensors[0].Matrix is not positive definite") ------------------------------------------------
+@pytest.mark.parametrize(
+    "old,new,where",
+    [
+        ("sigma = 1.0\n", "sigma = 1e200\n", r"model\.toml:10: sensors\[0\]\.sigma: 1e\+200 is outside \[2\^-537, 2\^500\]"),
+        ("sigma = 1.0\n", "sigma = 1e-300\n", r"model\.toml:10: sensors\[0\]\.sigma: 1e-300 is outside \[2\^-537, 2\^500\]"),
+        ("q = 0.01\n", "q = 1e308\n", r"model\.toml:4: motion\.q: the process noise of one 1 s step is too large for the measurement noise: sensor '[AB]'"),
+        ("mean = [10.0,", "mean = [1e308,", r"model\.toml:\d+: prior\.mean: 1e\+308 is beyond ±2\^500"),
+        ("position = [100.0, 0.0]", "position = [1e300, 0.0]", r"model\.toml:15: sensors\[1\]\.position: 1e\+300 is beyond ±2\^500"),
+        ("cov = [4.0, 0.25, 4.0, 0.25]", "cov = 1e20", r"model\.toml:\d+: prior\.cov: too large for the measurement noise: sensor '[AB]' \(sensors\[\d\]\) would have a predicted variance"),
+        ('type = "ekf"\n', 'type = "ekf"\nfading = 1e300\n', r"model\.toml:\d+: filter\.fading: 1e\+300 is beyond 2\^13"),
+    ],
+    ids=["sigma-1e200", "sigma-1e-300", "q-1e308", "mean-1e308", "position-1e300", "cov-1e20", "fading-1e300"],
+)
+def test_a_magnitude_float64_cannot_update_with_is_a_bad_model_file_naming_line_and_field(tmp_path, old, new, where):
+    assert old in BASE
+    with pytest.raises(ConfigError, match=where):
+        _load(tmp_path, BASE.replace(old, new, 1))
+
+
+def test_the_magnitude_limits_are_where_the_rules_put_them(tmp_path):
+    # σ at the ends of [2^-537, 2^500] and a prior whose H P Hᵀ / R is just under 2^48 load
+    _load(tmp_path, BASE.replace("sigma = 1.0\n", "sigma = 3.0e150\n", 1))
+    # a particle filter takes any σ whose square is positive (its weights underflow and it recovers) ...
+    pf = BASE.replace('type = "ekf"\n', 'type = "pf"\nparticles = 10\n', 1)
+    _load(tmp_path, pf.replace("sigma = 1.0\n", "sigma = 2.3e-162\n", 1))
+    with pytest.raises(ConfigError, match=r"sensors\[0\]\.sigma: 2\.1e-162 is outside"):
+        _load(tmp_path, pf.replace("sigma = 1.0\n", "sigma = 2.1e-162\n", 1))
+    # ... while the EKF holds a tiny R to the prior rule
+    with pytest.raises(ConfigError, match=r"prior\.cov: too large for the measurement noise: sensor 'A' \(sensors\[0\]\)"):
+        _load(tmp_path, BASE.replace("sigma = 1.0\n", "sigma = 1e-160\n", 1))
+    _load(tmp_path, BASE.replace("cov = [4.0, 0.25, 4.0, 0.25]", "cov = [2.8e14, 0.25, 2.8e14, 0.25]", 1))
+    with pytest.raises(ConfigError, match=r"prior\.cov: .* scale prior\.cov by at most 0\.9"):
+        _load(tmp_path, BASE.replace("cov = [4.0, 0.25, 4.0, 0.25]", "cov = [3.0e14, 0.25, 3.0e14, 0.25]", 1))
+    _load(tmp_path, BASE.replace('type = "ekf"\n', 'type = "ekf"\nfading = 8000.0\n', 1))

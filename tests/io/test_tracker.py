@@ -151,7 +151,8 @@ def test_a_step_that_would_overflow_the_filter_is_refused_and_the_filter_goes_on
     assert [(p.line, p.field) for p in res.problems] == [(3, "time")]
     assert res.problems[0].message == (
         "rejected at time 1e+300: 1e+300 s after the previous step at 1.0 is a gap the filter cannot "
-        "predict across (the filter failed: a number overflows)"
+        "predict across (the filter failed: ValueError: step 2: dt: 1e+300 s is beyond 2^200 ≈ 1.61e+60 s, "
+        "the longest step whose fifth power (the motion models' process noise) float64 holds)"
     )
     assert len(res.estimates) == 1
     # streaming: the same refusal, then the next record is filtered from the last good state
@@ -229,3 +230,25 @@ def test_a_late_record_at_or_before_the_prior_time_is_bad_whatever_the_policy(ws
     assert [(b.line, b.field) for b in bad] == [(3, "time"), (5, "time")]
     assert all("not after the prior's time 0.0" in b.message for b in bad)
     assert not any(isinstance(e, Dropped) for e in events)
+
+
+def test_a_step_whose_nis_comes_out_negative_is_refused_not_written(wsn_model_path):
+    # A prior covariance of 1e20 used to reach the output as a negative NIS; the loader refuses that
+    # prior now, and the tracker refuses any step whose NIS round-off made negative.
+    import dataclasses
+
+    model = load_track_model(wsn_model_path)
+
+    class NegativeNIS:  # the model's EKF, with the round-off of an update that lost R
+        def init(self, *args, **kwargs):
+            return model.filter.init(*args, **kwargs)
+
+        def step(self, *args, **kwargs):
+            state, info = model.filter.step(*args, **kwargs)
+            return state, {**info, "nis": np.where(np.isnan(info["nis"]), np.nan, -1e-5)}  # NaN: nothing measured
+
+    bad = dataclasses.replace(model, filter=NegativeNIS())
+    res = track_records(_records(csv_text([(1.0, "A1", 40.0), (2.0, "A1", 41.0)])), bad)
+    assert res.estimates == []
+    assert [(p.line, p.field) for p in res.problems] == [(2, "record"), (3, "record")]
+    assert "round-off made its NIS negative" in res.problems[0].message

@@ -38,7 +38,9 @@ from typing import Any, Mapping
 import numpy as np
 
 from .. import registry
+from .._validation import MAX_MEASUREMENT
 from ..experiment import ConfigError, config_error, read_toml
+from ..filters.gaussian import check_prior_against_noise
 from ..gaussian import Gaussian
 from ..models.measurement import LinearGaussian, RangeSensors, TimeOfArrival
 from ..models.sensors import BearingSensors, stack
@@ -186,7 +188,101 @@ def _sigma(field: str, v: Any) -> np.ndarray:
     arr = registry.Param("sigma", "vector").convert(field, v)
     if arr.size == 0 or np.any(arr <= 0):
         raise ValueError(f"{field}: noise standard deviations must be positive, got {v!r}")
+    _sigma_squarable(field, arr)
     return arr
+
+
+# --------------------------------------------------------------------------
+# magnitudes float64 can square, invert and update with
+# --------------------------------------------------------------------------
+_SQUARABLE = MAX_MEASUREMENT  # 2^500: its square 2^1000 leaves a factor 2^24 below float64's overflow at 2^1024
+_MIN_SIGMA = 2.0**-537  # its square 2^-1074 is the smallest positive float64; below, R = σ² is 0
+_MAX_FADING = 2.0**13
+
+
+def _sigma_squarable(field: str, sigma: np.ndarray) -> None:
+    """σ within [2⁻⁵³⁷, 2⁵⁰⁰]: R = σ² must be a positive, finite float64 number, with room to spare above.
+
+    σ = 1e200 overflowed R to infinity (and every record was blamed), σ = 1e-300 underflowed it
+    to 0 ("Matrix is not positive definite").  2⁵⁰⁰ squared is 2¹⁰⁰⁰ (float64 overflows above
+    2¹⁰²⁴), leaving a factor 2²⁴ for the sums and products of the update; 2⁻⁵³⁷ squared is
+    2⁻¹⁰⁷⁴, the smallest positive float64.  A σ² that is positive but tiny is usable: a particle
+    filter's weights then underflow and it recovers and flags it, and the Gaussian filters are
+    held to the prior rule of :func:`_check_magnitudes`, which refuses such an R.
+    """
+    a = np.abs(sigma)
+    out = (a > _SQUARABLE) | (a < _MIN_SIGMA)
+    if np.any(out):
+        bad = float(sigma.reshape(-1)[int(np.argmax(out))])
+        raise ValueError(
+            f"{field}: {bad:g} is outside [2^-537, 2^500] ≈ [{_MIN_SIGMA:.3g}, {_SQUARABLE:.3g}]: the filter squares the "
+            "noise standard deviation, and float64 holds that square only in this range (0 below, infinity above)"
+        )
+
+
+def _state_squarable(field: str, values: np.ndarray) -> None:
+    """Positions and the prior mean within ±2⁵⁰⁰: the filter squares them (ranges, sigma points), as it squares measurements."""
+    a = np.abs(values)
+    if np.any(a > _SQUARABLE):
+        bad = float(values.reshape(-1)[int(np.argmax(a))])
+        raise ValueError(
+            f"{field}: {bad:g} is beyond ±2^500 ≈ {_SQUARABLE:.3g}, the largest magnitude the filter can square "
+            "(ranges, sigma points) without overflowing float64"
+        )
+
+
+def _kalman_updates(filt: Any) -> bool:
+    """Whether ``filt`` (or a mode of an IMM) runs a Gaussian filter's Kalman update."""
+    from ..filters.gaussian import _GaussianFilter
+
+    return isinstance(filt, _GaussianFilter) or any(_kalman_updates(f) for f in getattr(filt, "filters", ()))
+
+
+def _check_magnitudes(motion: Any, measurement: Any, prior: Gaussian | None, filt: Any, sensors: Mapping[str, Sensor]) -> None:
+    """Refuse a prior, a process noise or a fading factor too large for float64 to update against R (Gaussian filters).
+
+    The prior covariance and the process noise of one nominal step are held to the rule of
+    :func:`pursuit.filters.gaussian.check_prior_against_noise`: every measurement component's
+    (H P Hᵀ)_ii / R_ii at most 2⁴⁸ (≈ 2.8e14, a factor 16 below 1/ε), since the first update
+    leaves a covariance of about that condition number.  Every step adds Q, so a Q that breaks
+    the rule breaks every update.  A constant fading factor multiplies the covariance at every
+    step and compounds: measured on WSNRange (EKF, 10 runs x 100 steps) λ = 1e4 is exact and
+    λ = 1e6 gives non-positive-definite covariances and negative NIS from the first steps, so
+    λ ≤ 2¹³ ≈ 8.2e3 (measured, not derived).  A model without ``[prior]`` (initiation from the
+    first measurements) has no state to take H at, so only its fading factor is checked here;
+    the prior it builds is checked by the filter's ``init``.
+    """
+    order = {sid: i for i, sid in enumerate(sensors)}
+    names = [""] * sum(sen.dim for sen in sensors.values())
+    for sid, sen in sensors.items():
+        for j in range(sen.dim):
+            axis = f", component {j}" if sen.dim > 1 else ""
+            names[sen.start + j] = f"sensor {sid!r} (sensors[{order[sid]}]{axis})"
+    if not _kalman_updates(filt):  # particle filters do not form S = H P Hᵀ + R
+        return
+    _check_fading(filt)
+    if prior is None:
+        return
+    try:
+        check_prior_against_noise(measurement, prior.mean, prior.cov, names=names)
+    except ValueError as e:
+        raise ValueError(str(e).replace("scale the prior covariance by", "scale prior.cov by", 1)) from None
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflowing Q is refused just below
+        Q = np.asarray(motion.cov(1, motion.dt), dtype=float)
+    try:
+        check_prior_against_noise(measurement, prior.mean, Q, names=names)
+    except ValueError as e:
+        msg = str(e).split(":", 1)[1].replace("scale the prior covariance by", "scale motion.q by", 1)
+        raise ValueError(f"motion.q: the process noise of one {motion.dt:g} s step is{msg}") from None
+
+
+def _check_fading(filt: Any) -> None:
+    lam = getattr(getattr(filt, "fading", None), "lam", None)
+    if isinstance(lam, float) and lam > _MAX_FADING:
+        raise ValueError(
+            f"filter.fading: {lam:g} is beyond 2^13 ≈ {_MAX_FADING:.3g}: a constant fading factor multiplies the covariance "
+            "at every step, and beyond that the updates lose positive definiteness in float64 (measured: 1e4 is exact, 1e6 is not)"
+        )
 
 
 def _valid(field: str, v: np.ndarray) -> tuple[float, float]:
@@ -299,6 +395,7 @@ def build_track_model(doc: Mapping[str, Any], name: str = "track", path: Path | 
         velocity_indices=motion.velocity_indices,
     )
     filt = _build_filter(doc["filter"], view) if "imm" not in doc else _imm_filter(doc["filter"], view, imm_vals, modes, doc["sensors"])
+    _check_magnitudes(motion, measurement, prior, filt, sensors)
     return TrackModel(
         name=view.name,
         motion=motion,
@@ -335,6 +432,7 @@ def _build_prior(vals: dict[str, Any], n: int) -> Gaussian:
     mean = vals["mean"]
     if mean.shape != (n,):
         raise ValueError(f"prior.mean: expected {n} values for the state, got {mean.shape[0]}")
+    _state_squarable("prior.mean", mean)
     try:
         return Gaussian(mean, vals["cov"])
     except ValueError as e:
@@ -366,6 +464,7 @@ def _build_sensors(entries: Any, motion: Any) -> tuple[dict[str, Sensor], Any]:
                 raise ValueError(f"{where}.position: required for a {kind!r} sensor")
             if v["position"].shape != (ndim,):
                 raise ValueError(f"{where}.position: expected {ndim} coordinates (motion.ndim), got {v['position'].size}")
+            _state_squarable(f"{where}.position", v["position"])
             if v["sigma"].size != 1:
                 raise ValueError(f"{where}.sigma: expected one number for a {kind!r} sensor")
         if kind == "bearing" and ndim != 2:

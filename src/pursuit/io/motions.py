@@ -90,10 +90,10 @@ def build_motion(vals: dict[str, Any], where: str, ndim: int, dt: float) -> tupl
     if kind in ("ct", "singer") and vals.get("noise", "discrete") != "discrete":
         raise ValueError(f"{where}.noise: a {kind!r} motion has its own process noise; only 'discrete' applies to cv and ca")
     axes = "xyz"[:ndim]
-    if kind == "cv":
-        motion = ConstantVelocity(ndim=ndim, dt=dt, q=vals["q"], noise=vals["noise"])
-    elif kind == "ca":
-        motion = ConstantAcceleration(ndim=ndim, dt=dt, q=vals["q"], noise=vals["noise"])
+    if kind in ("cv", "ca"):
+        cls = ConstantVelocity if kind == "cv" else ConstantAcceleration
+        with np.errstate(over="ignore", invalid="ignore"):  # a q that overflows Q is refused by model._check_magnitudes
+            motion = cls(ndim=ndim, dt=dt, q=vals["q"], noise=vals["noise"])
     elif kind == "ct":
         if ndim not in (2, 3):
             raise ValueError(f"{where}.type: a 'ct' motion turns in the x-y plane: it needs ndim = 2 or 3, got {ndim}")

@@ -108,6 +108,8 @@ class Tracker:
             return f"the filter failed: {_describe(e)}", None, None, None, None
         if not healthy:
             return "the estimate would not be finite with positive variances", None, None, None, None
+        if np.any(np.asarray(info["nis"]) < 0):  # exactly S ⪰ R > 0: a negative NIS is round-off, never written
+            return "round-off made its NIS negative (the covariance is too large for the sensors' noise)", None, None, None, None
         return "", state, info, mean, var
 
     def update(self, step: Step) -> Estimate:
