@@ -263,3 +263,26 @@ def test_a_signal_while_writing_is_one_line_and_leaves_no_temp_folder(tmp_path, 
     assert capsys.readouterr().err == line + "\n"
     assert list(out.iterdir()) == []
     assert {s: signal.getsignal(s) for s in before} == before
+
+
+def test_a_signal_ignored_at_start_stays_ignored(tmp_path, config, monkeypatch):
+    """`nohup pursuit run ...` ignores SIGHUP: the command must not start reacting to it."""
+    import signal
+
+    from pursuit.report import html
+
+    seen = {}
+    real = html.write_report
+
+    def spy(folder):
+        seen.update({s: signal.getsignal(s) for s in (signal.SIGHUP, signal.SIGTERM)})
+        return real(folder)
+
+    monkeypatch.setattr(html, "write_report", spy)
+    previous = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    try:
+        assert main(["run", str(config), "--out", str(tmp_path / "o"), "--no-progress", "--no-pdf"]) == 0
+    finally:
+        signal.signal(signal.SIGHUP, previous)
+    assert seen[signal.SIGHUP] is signal.SIG_IGN
+    assert seen[signal.SIGTERM] not in (signal.SIG_IGN, signal.SIG_DFL)  # handled while the command runs

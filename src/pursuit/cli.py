@@ -60,9 +60,12 @@ def _signals_unwind():
     Raising unwinds every ``with`` and ``finally`` on the way: local workers
     are stopped, a temporary output folder is removed.  Further signals
     during that clean-up are ignored, so it is not cut short (it is bounded:
-    workers get 2 s to stop before they are killed).
+    workers get 2 s to stop before they are killed).  A signal that was
+    ignored when the command started (``nohup`` ignores SIGHUP, a shell's
+    background job SIGINT) stays ignored.
     """
     names = [n for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n)]
+    names = [n for n in names if signal.getsignal(getattr(signal, n)) is not signal.SIG_IGN]
     fired = False
 
     def handler(signum, frame):
