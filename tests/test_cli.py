@@ -172,3 +172,117 @@ def test_a_track_model_given_to_run_and_an_experiment_given_to_track_say_which_c
     assert f"this is a `pursuit track` model file, not an experiment: run it as pursuit track DATA --config {model}" in capsys.readouterr().err
     assert main(["track", str(root / "examples" / "data" / "wsn-range.csv"), "-c", str(experiment)]) == 2
     assert f"this is an experiment file, not a `pursuit track` model file: run it as pursuit run {experiment}" in capsys.readouterr().err
+
+
+LONG = GOOD.replace("steps = 5", "steps = 100")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="lists processes through /proc")
+@pytest.mark.parametrize(
+    "sig, group, code, line",
+    [
+        ("SIGINT", True, 130, "pursuit: interrupted"),  # Ctrl-C in a terminal: the whole process group
+        ("SIGTERM", False, 143, "pursuit: stopped by SIGTERM"),  # kill PID
+        ("SIGHUP", False, 129, "pursuit: stopped by SIGHUP"),  # the terminal closed
+    ],
+)
+def test_a_signal_ends_a_run_with_workers_cleanly(tmp_path, sig, group, code, line):
+    """One line, exit 128 + signal, no traceback, no worker / forkserver / resource tracker left, no temp folder."""
+    import os
+    import signal
+
+    from .engine.helpers import session_pids, wait_until
+
+    config = tmp_path / "exp.toml"
+    config.write_text(LONG)
+    out = tmp_path / "out"
+    err = tmp_path / "stderr.txt"
+    with err.open("wb") as fh:  # a file, not a pipe: a leftover process holding it must not hang the test
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "pursuit", "run", str(config), "--out", str(out / "exp"), "--runs", "200000",
+             "--chunk-size", "500", "--workers", "2", "--no-progress"],
+            stdout=subprocess.DEVNULL, stderr=fh, start_new_session=True,
+        )
+    try:
+        # main, resource tracker, forkserver and 2 workers
+        assert wait_until(lambda: len(session_pids(proc.pid)) >= 5, 120), err.read_text()
+        (os.killpg if group else os.kill)(proc.pid, getattr(signal, sig))
+        assert proc.wait(30) == code, err.read_text()
+        assert wait_until(lambda: not session_pids(proc.pid), 20), f"still alive: {session_pids(proc.pid)}"
+    finally:
+        for pid in session_pids(proc.pid):
+            os.kill(pid, signal.SIGKILL)
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(30)
+    assert err.read_text() == line + "\n"
+    assert not out.exists() or list(out.iterdir()) == []
+
+
+def test_workers_that_keep_dying_are_one_line_and_exit_3(tmp_path, config, capsys, monkeypatch):
+    """Every worker dies (as when the system kills them): one warning line per restart, then one error line."""
+    import dataclasses
+
+    from pursuit import cli
+    from pursuit.experiment import load_experiment
+
+    from .engine.helpers import KillsItsWorker
+
+    exp = load_experiment(config)
+    exp = dataclasses.replace(exp, plan=dataclasses.replace(exp.plan, scenario=KillsItsWorker(exp.plan.scenario)))
+    monkeypatch.setattr(cli, "load_experiment", lambda path: exp)
+    out = tmp_path / "out"
+    assert main(["run", str(config), "--out", str(out), "--workers", "2", "--no-progress"]) == 3
+    err = capsys.readouterr().err.splitlines()
+    assert err == [
+        *(f"pursuit: warning: a worker process died; computing 1 chunk(s) again (restart {i} of at most 3)" for i in (1, 2, 3)),
+        "pursuit: error: local worker processes died 4 times (at most 3 restarts); 1 chunk(s) left uncomputed",
+    ]
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "raised, code, line",
+    [("KeyboardInterrupt", 130, "pursuit: interrupted"), ("SIGTERM", 143, "pursuit: stopped by SIGTERM")],
+)
+def test_a_signal_while_writing_is_one_line_and_leaves_no_temp_folder(tmp_path, config, capsys, monkeypatch, raised, code, line):
+    """The signal arrives while the output folder is written: one line, 128 + signal, nothing left behind,
+    and the signal handlers are the caller's again afterwards."""
+    import signal
+
+    from pursuit import cli
+    from pursuit.report import html
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt if raised == "KeyboardInterrupt" else cli.Terminated(signal.SIGTERM)
+
+    monkeypatch.setattr(html, "write_report", interrupted)
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    out = tmp_path / "out"
+    assert main(["run", str(config), "--out", str(out / "exp"), "--no-progress", "--no-pdf"]) == code
+    assert capsys.readouterr().err == line + "\n"
+    assert list(out.iterdir()) == []
+    assert {s: signal.getsignal(s) for s in before} == before
+
+
+def test_a_signal_ignored_at_start_stays_ignored(tmp_path, config, monkeypatch):
+    """`nohup pursuit run ...` ignores SIGHUP: the command must not start reacting to it."""
+    import signal
+
+    from pursuit.report import html
+
+    seen = {}
+    real = html.write_report
+
+    def spy(folder):
+        seen.update({s: signal.getsignal(s) for s in (signal.SIGHUP, signal.SIGTERM)})
+        return real(folder)
+
+    monkeypatch.setattr(html, "write_report", spy)
+    previous = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    try:
+        assert main(["run", str(config), "--out", str(tmp_path / "o"), "--no-progress", "--no-pdf"]) == 0
+    finally:
+        signal.signal(signal.SIGHUP, previous)
+    assert seen[signal.SIGHUP] is signal.SIG_IGN
+    assert seen[signal.SIGTERM] not in (signal.SIG_IGN, signal.SIG_DFL)  # handled while the command runs

@@ -144,3 +144,71 @@ def test_paper_tables_keep_their_kind(full, tmp_path):
     loaded = pursuit.load(write_output(out, tmp_path / "p"))
     assert [t.kind for t in loaded.tables] == ["result", "paper"]
     assert loaded.tables[1].notes == "n"
+
+
+_KILLED_WRITER = r"""
+import os, sys, time
+from pursuit.experiment import ExperimentOutput, Table
+from pursuit.report.output import write_output
+
+class Blocks:
+    def savefig(self, path, **kw):
+        open(sys.argv[2], "w").write(str(os.getpid()))
+        time.sleep(120)  # the test SIGKILLs this process meanwhile
+
+out = ExperimentOutput("demo", "Demo", "", [Table("summary", "S", ["a"], [[1.0]])], {"f": Blocks()})
+write_output(out, sys.argv[1], formats=("png",))
+"""
+
+
+def test_a_killed_writers_temp_folder_is_removed_by_the_next_write(tmp_path):
+    """SIGKILL a process in the middle of write_output: the next write of that folder removes its temp folder."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    marker = tmp_path / "writing.pid"
+    root = tmp_path / "out"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(Path(pursuit.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.Popen([sys.executable, "-c", _KILLED_WRITER, str(root / "demo"), str(marker)], env=env)
+    try:
+        deadline = time.monotonic() + 120  # a loaded machine may take a while to import
+        while not (marker.exists() and marker.read_text()):
+            assert proc.poll() is None and time.monotonic() < deadline, "the writer did not reach its figures"
+            time.sleep(0.05)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(30)
+    left = [p.name for p in root.iterdir()]
+    assert len(left) == 1 and left[0].startswith(".demo.")  # what the killed writer left
+    out = ExperimentOutput("demo", "Demo", "", [Table("summary", "S", ["a"], [[2.0]])], {})
+    write_output(out, root / "demo", formats=("png",))
+    assert [p.name for p in root.iterdir()] == ["demo"]
+
+
+@pytest.mark.parametrize("atomic", [True, False], ids=["exchange", "two-renames"])
+def test_write_output_interrupted_between_the_renames_keeps_an_output(tmp_path, monkeypatch, atomic):
+    """Ctrl-C at the moment the new folder is moved in: DIR is still there, old or new, and nothing else is."""
+    from pursuit import output_folder
+
+    if not atomic:
+        monkeypatch.setattr(output_folder, "_exchange", lambda a, b: False)
+    first = ExperimentOutput("demo", "Demo", "", [Table("summary", "S", ["a"], [[1.0]])], {})
+    second = ExperimentOutput("demo", "Demo", "", [Table("summary", "S", ["a"], [[2.0]])], {})
+    target = write_output(first, tmp_path / "demo", formats=("png",))
+    real = Path.rename
+
+    def rename(self, dest):
+        if Path(dest) == target and self.name.startswith(".demo.") and "old" not in self.name:
+            raise KeyboardInterrupt  # the new folder moved in (moving the old one back is allowed)
+        return real(self, dest)
+
+    monkeypatch.setattr(Path, "rename", rename)
+    try:
+        write_output(second, target, formats=("png",))
+    except KeyboardInterrupt:
+        pass
+    assert [p.name for p in tmp_path.iterdir()] == ["demo"]
+    assert pursuit.load(target).tables[0].rows in ([[1.0]], [[2.0]])

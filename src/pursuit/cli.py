@@ -12,14 +12,22 @@
 ``pursuit`` alone prints this list of commands; ``pursuit --version`` the
 version; ``python -m pursuit`` is the same command.
 
-Exit codes: 0 success, 2 bad input (config, arguments), 1 unexpected failure.
+Exit codes: 0 success, 2 bad input (config, arguments), 3 the computation
+failed for want of workers (they kept dying, or a Dask cluster had none left),
+130 interrupted (Ctrl-C), 143 terminated (SIGTERM), 129 hung up (SIGHUP), 1
+unexpected failure.  On a signal the command stops its worker processes,
+removes its temporary folder and prints one line; an output folder is never
+left half-written.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import shlex
+import signal
 import sys
+import warnings
 from pathlib import Path
 from typing import Sequence
 
@@ -29,6 +37,61 @@ from .experiment import ConfigError, find_experiment, list_experiments, load_exp
 __all__ = ["main"]
 
 EXIT_BAD_INPUT = 2
+EXIT_NO_WORKERS = 3
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports it
+
+
+class Terminated(BaseException):
+    """SIGTERM or SIGHUP reached the command: unwind (closing workers, removing temp folders) and exit 128 + signum.
+
+    A ``BaseException``, like ``KeyboardInterrupt``, so that no ``except
+    Exception`` on the way swallows it.
+    """
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+@contextlib.contextmanager
+def _signals_unwind():
+    """Turn SIGINT, SIGTERM and SIGHUP into exceptions (the first one only) while the command runs.
+
+    Raising unwinds every ``with`` and ``finally`` on the way: local workers
+    are stopped, a temporary output folder is removed.  Further signals
+    during that clean-up are ignored, so it is not cut short (it is bounded:
+    workers get 2 s to stop before they are killed).  A signal that was
+    ignored when the command started (``nohup`` ignores SIGHUP, a shell's
+    background job SIGINT) stays ignored.
+    """
+    names = [n for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n)]
+    names = [n for n in names if signal.getsignal(getattr(signal, n)) is not signal.SIG_IGN]
+    fired = False
+
+    def handler(signum, frame):
+        nonlocal fired
+        if fired:
+            return
+        fired = True
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        raise Terminated(signum)
+
+    try:
+        previous = {n: signal.signal(getattr(signal, n), handler) for n in names}
+    except ValueError:  # not the main thread (main() called from a thread): leave signals alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        for n, h in previous.items():
+            signal.signal(getattr(signal, n), h)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Warnings from the engine as one line (``pursuit: warning: ...``), not with a source line."""
+    print(f"pursuit: warning: {message}", file=sys.stderr if file is None else file)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -74,6 +137,12 @@ def _add_engine_arguments(sp: argparse.ArgumentParser) -> None:
         "--scheduler", metavar="tcp://HOST:PORT", help="run the chunks on a Dask cluster (needs pursuit[distributed])"
     )
     g.add_argument(
+        "--worker-timeout",
+        type=float,
+        metavar="SECONDS",
+        help="with --scheduler: give up (exit 3) when the cluster has had no worker for this long (default 60)",
+    )
+    g.add_argument(
         "--store",
         choices=["auto", "full", "summary"],
         help="keep every run's arrays (full) or reduce each chunk (summary: memory bounded by the chunk size); "
@@ -102,24 +171,41 @@ def main(argv: Sequence[str] | None = None) -> int:
         from .compute import set_default_backend
 
         set_default_backend(args.compute_backend)
-    try:
-        if args.command == "list":
-            return _cmd_list(args)
-        if args.command == "run":
-            return _cmd_run(args)
-        if args.command == "reproduce":
-            return _cmd_reproduce(args)
-        if args.command == "report":
-            return _cmd_report(args)
-        if args.command == "track":
-            from .io.command import run_track
+    from .engine.backends import WorkerLost
 
-            return run_track(args)
+    try:
+        with _signals_unwind(), warnings.catch_warnings():
+            warnings.showwarning = _show_warning  # restored by catch_warnings
+            return _dispatch(args)
     except ConfigError as e:
         print(f"pursuit: error: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except WorkerLost as e:
+        print(f"pursuit: error: {e}", file=sys.stderr)
+        return EXIT_NO_WORKERS
     except BrokenPipeError:  # output piped into head and closed
         return 0
+    except KeyboardInterrupt:
+        print("pursuit: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Terminated as e:
+        print(f"pursuit: stopped by {signal.Signals(e.signum).name}", file=sys.stderr)
+        return 128 + e.signum
+
+
+def _dispatch(args) -> int:
+    if args.command == "list":
+        return _cmd_list(args)
+    if args.command == "run":
+        return _cmd_run(args)
+    if args.command == "reproduce":
+        return _cmd_reproduce(args)
+    if args.command == "report":
+        return _cmd_report(args)
+    if args.command == "track":
+        from .io.command import run_track
+
+        return run_track(args)
     return 1  # pragma: no cover - argparse guarantees a command
 
 
@@ -163,7 +249,7 @@ def _backend(args, source: str):
     from .engine.backends import make_backend
 
     try:
-        return make_backend(workers=args.workers, scheduler=args.scheduler)
+        return make_backend(workers=args.workers, scheduler=args.scheduler, worker_timeout=args.worker_timeout)
     except (ImportError, ConnectionError, OSError, ValueError) as e:
         raise ConfigError(source, str(e)) from None
 

@@ -159,3 +159,83 @@ def assert_same_summary(a, b) -> None:
             x, y = ra[key], rb[key]
             same = x == y or (isinstance(x, float) and math.isnan(x) and math.isnan(y))
             assert same, (ra["filter"], key, x, y)
+
+
+@dataclass(frozen=True)
+class KillsItsWorker:
+    """A scenario that SIGKILLs the worker process simulating with it, every time (a worker that keeps dying).
+
+    In a process not started by :mod:`multiprocessing` (the test runner
+    itself) it raises instead, so a mistake cannot kill the test session.
+    """
+
+    inner: Any
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "inner" or name.startswith("__"):
+            raise AttributeError(name)
+        return getattr(self.inner, name)
+
+    @property
+    def name(self) -> str:
+        return self.inner.name
+
+    def simulate(self, rng, runs=None):
+        import multiprocessing
+
+        if multiprocessing.parent_process() is None:
+            raise RuntimeError("KillsItsWorker: simulate called outside a worker process")
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+def session_pids(sid: int) -> list[int]:
+    """Ids of the live processes in session ``sid`` (Linux ``/proc``), zombies excluded."""
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:  # ended meanwhile
+            continue
+        fields = stat[stat.rindex(")") + 2:].split()  # after "pid (comm) "
+        if fields[0] != "Z" and int(fields[3]) == sid:
+            pids.append(int(entry.name))
+    return sorted(pids)
+
+
+def wait_until(condition, timeout: float, interval: float = 0.05) -> bool:
+    """Poll ``condition()`` until it is true or ``timeout`` seconds have passed; returns its last value."""
+    deadline = time.monotonic() + timeout
+    while True:
+        if condition():
+            return True
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(interval)
+
+
+@dataclass(frozen=True)
+class SlowButOnce:
+    """A scenario whose first simulation (in any process, chosen through ``O_EXCL`` on ``marker``) is
+    immediate and every later one sleeps ``delay_s`` first: one chunk finishes while others still run."""
+
+    inner: Any
+    marker: str
+    delay_s: float = 60.0
+
+    def __getattr__(self, name: str) -> Any:
+        if name in ("inner", "marker", "delay_s") or name.startswith("__"):
+            raise AttributeError(name)
+        return getattr(self.inner, name)
+
+    @property
+    def name(self) -> str:
+        return self.inner.name
+
+    def simulate(self, rng, runs=None):
+        try:
+            os.close(os.open(self.marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+        except FileExistsError:
+            time.sleep(self.delay_s)
+        return self.inner.simulate(rng, runs)

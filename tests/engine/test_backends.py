@@ -1,6 +1,7 @@
 """Backends: local processes give the serial bits, survive a killed worker, report progress."""
 
 import pickle
+import sys
 import warnings
 
 import numpy as np
@@ -8,11 +9,23 @@ import pytest
 
 from pursuit.components.scenarios import _cv_position, _wsn
 from pursuit.engine import monte_carlo
-from pursuit.engine.backends import LocalProcesses, Serial, WorkerRestart, engine_options, make_backend
+from pursuit.engine.backends import LocalProcesses, Serial, WorkerLost, WorkerRestart, engine_options, make_backend
 from pursuit.scenarios import LinearCV, WSNRange
 
 from ..filters.cases import CASES, NONLINEAR_CASES
-from .helpers import SMALL, Failing, Killer, PauseOnce, Slow, assert_same_result, small_filters
+from .helpers import (
+    SMALL,
+    Failing,
+    Killer,
+    KillsItsWorker,
+    PauseOnce,
+    Slow,
+    SlowButOnce,
+    assert_same_result,
+    session_pids,
+    small_filters,
+    wait_until,
+)
 
 RUNS, SEED = 30, 3
 
@@ -122,6 +135,11 @@ def test_make_backend_checks_its_arguments():
         make_backend(scheduler="127.0.0.1:8786")
     with pytest.raises(ValueError, match="workers"):
         LocalProcesses(0)
+    with pytest.raises(ValueError, match="--worker-timeout applies to --scheduler only"):
+        make_backend(workers=2, worker_timeout=5)
+    for bad in (0, -1, float("nan")):
+        with pytest.raises(ValueError, match=r"--worker-timeout: must be a number of seconds > 0"):
+            make_backend(scheduler="tcp://127.0.0.1:1", worker_timeout=bad)
 
 
 def test_progress_bar_draws_as_chunks_finish(pool, monkeypatch):
@@ -162,3 +180,78 @@ def test_workers_compute_on_one_thread_each():
         backend.map_chunks(_worker_thread_env, [(0, 1)], lambda span, result: seen.append(result))
     assert seen == [{name: before[name] or "1" for name in WORKER_THREAD_ENV}]
     assert {name: os.environ.get(name) for name in WORKER_THREAD_ENV} == before
+
+
+def test_interrupt_stops_the_workers_without_waiting_for_their_chunks(tmp_path):
+    """Ctrl-C while chunks run (raised here from the progress hook, in the main thread as a signal would be):
+    the workers are stopped at once, not after the 60 s their chunks still need."""
+    import os
+    import time
+
+    scenario = SlowButOnce(SMALL, str(tmp_path / "first"), delay_s=60.0)
+    workers: list[int] = []
+    raised: list[float] = []
+
+    def progress(done, total):
+        workers.extend(backend._pool._processes)
+        raised.append(time.monotonic())
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        with LocalProcesses(2) as backend:
+            monte_carlo(scenario, small_filters(), 8, SEED, chunk_size=2, backend=backend, progress=progress)
+    assert time.monotonic() - raised[0] < 15
+    assert len(workers) == 2
+    for pid in workers:
+        with pytest.raises(ProcessLookupError):  # ended and reaped
+            os.kill(pid, 0)
+    assert backend._pool is None
+
+
+def test_workers_that_keep_dying_end_in_worker_lost(tmp_path):
+    with LocalProcesses(2, max_restarts=1) as backend, warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(WorkerLost, match=r"died 2 times \(at most 1 restarts\); 2 chunk\(s\) left uncomputed"):
+            monte_carlo(KillsItsWorker(SMALL), small_filters(), 4, SEED, chunk_size=2, backend=backend)
+    restarts = [str(w.message) for w in caught if issubclass(w.category, WorkerRestart)]
+    assert restarts == ["a worker process died; computing 2 chunk(s) again (restart 1 of at most 1)"]
+
+
+_ORPHAN_PARENT = r"""
+import sys
+from pursuit.engine import monte_carlo
+from pursuit.engine.backends import LocalProcesses
+from tests.engine.helpers import SMALL, Slow, small_filters
+
+if __name__ == "__main__":
+    with LocalProcesses(2) as backend:
+        monte_carlo(Slow(SMALL, 60.0), small_filters(), 8, 1, chunk_size=2, backend=backend)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="lists processes through /proc")
+def test_workers_end_when_their_parent_is_killed(tmp_path):
+    """SIGKILL the process that owns a pool (it cannot clean up): its workers, the forkserver and the
+    resource tracker end within seconds, not when their 60 s chunks are done."""
+    import os
+    import signal
+    import subprocess
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    script = tmp_path / "parent.py"
+    script.write_text(_ORPHAN_PARENT)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(root / "src"), str(root), os.environ.get("PYTHONPATH")])))
+    proc = subprocess.Popen([sys.executable, str(script)], env=env, start_new_session=True, cwd=root)
+    try:
+        # main, resource tracker, forkserver and 2 workers
+        assert wait_until(lambda: len(session_pids(proc.pid)) >= 5, 120), session_pids(proc.pid)
+        proc.kill()
+        proc.wait(30)
+        assert wait_until(lambda: not session_pids(proc.pid), 20), f"still alive: {session_pids(proc.pid)}"
+    finally:
+        for pid in session_pids(proc.pid):
+            os.kill(pid, signal.SIGKILL)
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(30)

@@ -12,11 +12,14 @@ computed does not change a bit of it.
   needs nothing beyond NumPy).
 * :class:`LocalProcesses`: ``workers`` local processes
   (:mod:`concurrent.futures`).  If a worker process dies, the pool is
-  restarted and every chunk without a result is computed again.
+  restarted and every chunk without a result is computed again.  Workers
+  end when this process ends, however it ends (even by SIGKILL), and are
+  stopped at once when the computation is interrupted.
 * :class:`Dask`: a ``dask.distributed`` cluster at ``tcp://HOST:PORT`` (or a
   ``Client`` you already have).  Needs the optional extra
   ``pursuit[distributed]``.  When a worker dies, the scheduler gives its
-  chunks to another worker.
+  chunks to another worker; when the cluster has had no worker at all for
+  ``worker_timeout`` seconds, :class:`WorkerLost`.
 
 In every case a chunk's result is kept once: the engine checks that the
 returned chunks tile the runs exactly, so no run is lost or counted twice.
@@ -32,10 +35,14 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import multiprocessing
+import multiprocessing.connection
 import os
+import signal
+import threading
+import time
 import uuid
 import warnings
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, CancelledError, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any, Callable, Iterator, Protocol, Sequence
@@ -140,6 +147,35 @@ def _one_thread_per_worker():
             os.environ.pop(name, None)
 
 
+def _worker_init() -> None:
+    """Worker initializer: leave Ctrl-C to the parent; end as soon as the parent has ended.
+
+    Ctrl-C in a terminal sends SIGINT to the whole process group: the parent
+    stops the workers itself (:meth:`LocalProcesses.terminate`), so a worker
+    ignores it rather than print a ``KeyboardInterrupt`` traceback of its own.
+
+    A parent that is killed (SIGKILL, or any signal it cannot clean up after)
+    cannot stop its workers, and a worker blocked on the pool's queue would
+    wait forever (it holds both ends of the queue's pipe).  The sentinel
+    ``multiprocessing`` gives each child becomes readable when the parent's
+    end closes, which happens however the parent ends.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent = multiprocessing.parent_process()
+    if parent is None or parent.sentinel is None:  # pragma: no cover - not started by multiprocessing
+        return
+
+    def watch() -> None:
+        multiprocessing.connection.wait([parent.sentinel])
+        os._exit(1)
+
+    threading.Thread(target=watch, name="pursuit-exit-with-parent", daemon=True).start()
+
+
+# How long a worker asked to stop (SIGTERM) may take before it is killed.
+_TERMINATE_GRACE_S = 2.0
+
+
 class LocalProcesses:
     """Chunks across ``workers`` local processes.
 
@@ -175,13 +211,34 @@ class LocalProcesses:
 
     def _executor(self) -> ProcessPoolExecutor:
         if self._pool is None:
-            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=_mp_context())
+            self._pool = ProcessPoolExecutor(
+                max_workers=self.workers, mp_context=_mp_context(), initializer=_worker_init
+            )
         return self._pool
 
     def _discard(self) -> None:
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
+
+    def terminate(self) -> None:
+        """Stop the worker processes now, without waiting for the chunks they compute.
+
+        Used when the computation is abandoned (Ctrl-C, SIGTERM, an error):
+        a graceful shutdown would wait for every running chunk.
+        """
+        pool, self._pool = self._pool, None
+        if pool is None:
+            return
+        procs = list((getattr(pool, "_processes", None) or {}).values())  # no public handle before Python 3.14
+        for proc in procs:
+            proc.terminate()
+        for proc in procs:
+            proc.join(_TERMINATE_GRACE_S)
+            if proc.is_alive():
+                proc.kill()
+                proc.join(_TERMINATE_GRACE_S)
+        pool.shutdown(wait=True, cancel_futures=True)
 
     def map_chunks(self, task, spans, on_result, **serial_kwargs) -> None:
         finished: set[Span] = set()
@@ -211,8 +268,10 @@ class LocalProcesses:
                         else:
                             deliver(fut, futures.pop(fut))  # drop our reference: the result is the engine's now
             except BaseException:
-                for fut in futures:
-                    fut.cancel()
+                # An error in a chunk, Ctrl-C, SIGTERM: the other chunks are of no use, so stop the workers
+                # instead of waiting for them.  (Not fut.cancel(): Python 3.11's pool then fails in its own
+                # thread with InvalidStateError when the workers are stopped.)
+                self.terminate()
                 raise
             if not broken:
                 return
@@ -233,8 +292,15 @@ class LocalProcesses:
             self.restarts += 1
             todo = [s for s in todo if s not in finished]
             if breaks > self.max_restarts:
-                raise WorkerLost(f"local worker processes died {breaks} times; {len(todo)} chunk(s) left uncomputed")
-            warnings.warn(f"a worker process died; computing {len(todo)} chunk(s) again", WorkerRestart, stacklevel=2)
+                raise WorkerLost(
+                    f"local worker processes died {breaks} times (at most {self.max_restarts} restarts); "
+                    f"{len(todo)} chunk(s) left uncomputed"
+                )
+            warnings.warn(
+                f"a worker process died; computing {len(todo)} chunk(s) again (restart {breaks} of at most {self.max_restarts})",
+                WorkerRestart,
+                stacklevel=2,
+            )
 
     def describe(self) -> dict[str, Any]:
         return {"backend": "processes", "workers": self.workers}
@@ -245,8 +311,11 @@ class LocalProcesses:
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def __exit__(self, exc_type, *exc) -> None:
+        if exc_type is None:
+            self.close()
+        else:  # the work is abandoned: chunks still running are of no use
+            self.terminate()
 
 
 def _import_distributed():
@@ -257,6 +326,11 @@ def _import_distributed():
             "a Dask scheduler needs dask.distributed: pip install 'pursuit[distributed]'"
         ) from None
     return distributed
+
+
+# How often the Dask backend looks at the cluster while it waits for chunks, and how long one look may take.
+_DASK_POLL_S = 1.0
+_DASK_ASK_TIMEOUT_S = 10.0
 
 
 class Dask:
@@ -274,6 +348,11 @@ class Dask:
     wait_timeout
         Seconds to wait for all chunks of one comparison (None: no limit);
         past it, :class:`TimeoutError`.
+    worker_timeout
+        Seconds the cluster may have no worker (all died, none started, or
+        the scheduler cannot be reached) while chunks are left, before
+        :class:`WorkerLost` is raised (default 60; None: wait for workers
+        forever).  Workers that join within it pick the chunks up.
 
     Notes
     -----
@@ -281,18 +360,28 @@ class Dask:
     inside the task, so only the small reduced result travels back.  When a
     worker dies, the scheduler reschedules its tasks on the remaining workers
     (up to ``distributed.scheduler.allowed-failures`` times per task, 3 by
-    default).  The workers need pursuit installed (same version), and any
-    user-defined model must be importable there.
+    default; past that, :class:`WorkerLost`).  The workers need pursuit
+    installed (same version), and any user-defined model must be importable
+    there.
     """
 
     def __init__(
-        self, address: str | None = None, *, client: Any = None, timeout: float = 30.0, wait_timeout: float | None = None
+        self,
+        address: str | None = None,
+        *,
+        client: Any = None,
+        timeout: float = 30.0,
+        wait_timeout: float | None = None,
+        worker_timeout: float | None = 60.0,
     ):
         distributed = _import_distributed()
         if (address is None) == (client is None):
             raise ValueError("give either a scheduler address or a client")
+        if worker_timeout is not None and not worker_timeout > 0:
+            raise ValueError(f"worker_timeout: must be a number of seconds > 0, got {worker_timeout!r}")
         self.address = address
         self.wait_timeout = wait_timeout
+        self.worker_timeout = worker_timeout
         self._own = client is None
         if client is None:
             try:
@@ -301,6 +390,17 @@ class Dask:
                 raise ConnectionError(f"--scheduler {address}: cannot connect ({e})") from None
         self.client = client
 
+    def _where(self) -> str:
+        return self.address or getattr(self.client.scheduler, "address", None) or "the scheduler"
+
+    def _workers_now(self) -> int:
+        """How many workers the scheduler has now (0 when it cannot be asked within a few seconds)."""
+        try:
+            info = self.client.sync(self.client.scheduler.identity, n_workers=0, callback_timeout=_DASK_ASK_TIMEOUT_S)
+        except Exception:  # connection closed, refused, timed out: no worker can deliver either
+            return 0
+        return int(info.get("n_workers", len(info.get("workers", ()))))
+
     def map_chunks(self, task, spans, on_result, **serial_kwargs) -> None:
         distributed = _import_distributed()
         token = uuid.uuid4().hex[:12]
@@ -308,18 +408,51 @@ class Dask:
             self.client.submit(task, s, e, key=f"pursuit-chunk-{token}-{s}-{e}", pure=False): (s, e) for s, e in spans
         }
         finished: set[Span] = set()
+        start = time.monotonic()
+        no_workers_since: float | None = None
         try:
-            for fut in distributed.as_completed(list(futures), loop=self.client.loop, timeout=self.wait_timeout):
-                span = futures[fut]
-                result = fut.result()
-                fut.release()
-                del futures[fut]
-                if span not in finished:
-                    finished.add(span)
-                    on_result(span, result)
-                del result
+            while futures:
+                # Wait a short while at a time: a cluster whose workers are all gone never completes
+                # or fails a task, so the wait itself has to look at the cluster (below).
+                try:
+                    with self.client.as_current():  # distributed.wait uses the current client
+                        done, _ = distributed.wait(list(futures), timeout=_DASK_POLL_S, return_when="FIRST_COMPLETED")
+                except TimeoutError:
+                    done = set()
+                for fut in done:
+                    span = futures.pop(fut)
+                    result = fut.result()
+                    fut.release()
+                    if span not in finished:
+                        finished.add(span)
+                        on_result(span, result)
+                    del result
+                if done or not futures:
+                    continue
+                now = time.monotonic()
+                if self.wait_timeout is not None and now - start > self.wait_timeout:
+                    raise TimeoutError(
+                        f"Dask cluster at {self._where()}: {len(futures)} chunk(s) not finished within {self.wait_timeout:g} s"
+                    )
+                if self.worker_timeout is None:
+                    continue
+                if self._workers_now() > 0:
+                    no_workers_since = None
+                elif no_workers_since is None:
+                    no_workers_since = now
+                elif now - no_workers_since >= self.worker_timeout:
+                    raise WorkerLost(
+                        f"the Dask cluster at {self._where()} has had no worker for {self.worker_timeout:g} s "
+                        f"(all died, none started, or the scheduler is unreachable); {len(futures)} chunk(s) left "
+                        "uncomputed (wait longer with --worker-timeout)"
+                    )
         except distributed.KilledWorker as e:
             raise WorkerLost(f"Dask workers died while computing a chunk too often: {e}") from None
+        except CancelledError:  # the scheduler dropped the task (it restarted, or the client reconnected)
+            raise WorkerLost(
+                f"the Dask cluster at {self._where()} lost a chunk (the scheduler restarted or the connection dropped); "
+                f"{len(futures) + 1} chunk(s) left uncomputed"
+            ) from None
         finally:
             for fut in list(futures):
                 if not fut.done():
@@ -349,14 +482,23 @@ class Dask:
         self.close()
 
 
-def make_backend(workers: int | None = None, scheduler: str | None = None) -> Backend:
-    """The backend for ``--workers`` / ``--scheduler`` (neither: :class:`Serial`)."""
+def make_backend(workers: int | None = None, scheduler: str | None = None, worker_timeout: float | None = None) -> Backend:
+    """The backend for ``--workers`` / ``--scheduler`` (neither: :class:`Serial`).
+
+    ``worker_timeout`` (``--worker-timeout``) is :class:`Dask`'s; None keeps its default.
+    """
     if workers is not None and scheduler is not None:
         raise ValueError("give --workers or --scheduler, not both")
+    if worker_timeout is not None and scheduler is None:
+        raise ValueError("--worker-timeout applies to --scheduler only")
     if scheduler is not None:
         if "://" not in scheduler:
             raise ValueError(f"--scheduler: expected an address like tcp://HOST:PORT, got {scheduler!r}")
-        return Dask(scheduler)
+        if worker_timeout is None:
+            return Dask(scheduler)
+        if not worker_timeout > 0:  # also nan
+            raise ValueError(f"--worker-timeout: must be a number of seconds > 0, got {worker_timeout}")
+        return Dask(scheduler, worker_timeout=worker_timeout)
     if workers is not None:
         if workers < 1:
             raise ValueError(f"--workers: must be at least 1, got {workers}")

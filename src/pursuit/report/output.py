@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import platform
 import shutil
 import sys
-import tempfile
 from datetime import datetime, timezone
 from importlib import metadata
 from pathlib import Path
@@ -113,7 +111,9 @@ def write_output(
     ``run.json`` sidecar and ``report.html`` (see :mod:`pursuit.storage`).
     Everything is written into a temporary folder beside ``out_dir`` and
     moved into place only when complete, so an error leaves either the
-    previous output or nothing, never a half-written folder.
+    previous output or nothing, never a half-written folder; the swap is
+    recoverable at every instant, and helper folders left by a killed
+    earlier writer are cleaned up first (see :mod:`pursuit.output_folder`).
 
     Parameters
     ----------
@@ -128,6 +128,7 @@ def write_output(
     command
         The command line that produced it, for the sidecar.
     """
+    from ..output_folder import make_temp, recover, replace
     from ..storage import (
         monte_carlo_results,
         save_results,
@@ -139,11 +140,9 @@ def write_output(
     formats = tuple(dict.fromkeys(("png", *formats)))
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    recover(out_dir)  # what a killed earlier writer of out_dir left behind
+    tmp = make_temp(out_dir)
     try:
-        mask = os.umask(0)
-        os.umask(mask)
-        os.chmod(tmp, 0o777 & ~mask)  # mkdtemp makes it private; the folder is meant to be shared
         files = {}
         for table in output.tables:
             _write_csv(tmp / f"{table.name}.csv", table)
@@ -183,13 +182,7 @@ def write_output(
         sidecar["files"] = {"run.json": FILES["run.json"], **files}
         (tmp / "run.json").write_text(json.dumps(sidecar, indent=2, default=json_default) + "\n")
         write_report(tmp)
-        old = None
-        if out_dir.exists():
-            old = out_dir.with_name(f".{out_dir.name}.old-{tmp.name.rsplit('.', 1)[-1]}")
-            out_dir.rename(old)
-        tmp.rename(out_dir)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+        replace(tmp, out_dir)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
