@@ -71,6 +71,8 @@ class Maneuver:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
                 raise ValueError(f"{name}: expected a finite number, got {v!r}")
+        if self.start < 0:  # the truth starts at t = 0: a segment before it is a typo or a shifted schedule
+            raise ValueError(f"start: must be at least 0 s (the truth starts at t = 0), got {self.start}")
         if self.stop < self.start:
             raise ValueError(f"stop: must not be before start ({self.start}), got {self.stop}")
 
