@@ -16,11 +16,13 @@ import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from . import registry
-from .engine.memory import MemoryNeeded
 from .registry import Param
+
+if TYPE_CHECKING:
+    from .engine.memory import MemoryNeeded
 
 __all__ = [
     "ConfigError",
@@ -162,6 +164,8 @@ class Experiment:
         self.check_runs(runs)
         seed = self.seed if seed is None else seed
         chunk = self.chunk_size if chunk_size is None else chunk_size
+        from .engine.memory import MemoryNeeded  # here: importing the engine is slow, `pursuit list` needs none of it
+
         try:
             out = self.plan.run(runs=runs, seed=seed, progress=progress, chunk_size=chunk)
         except MemoryNeeded as e:  # refused before computing: one line at the field to change

@@ -330,7 +330,7 @@ class ManeuverPlan:
 @register(
     "experiment",
     "maneuver",
-    "Maneuvering-target comparison with per-axis RMSE, maneuver segments and paper P4's claims; "
+    "Maneuvering-target comparison with per-axis RMSE, maneuver segments and the claims of Fang & Yang's paper; "
     "sections [scenario], [[filters]], [figures], [claims]",
 )
 def _maneuver(sections: dict[str, Any], path: Path, name: str) -> ManeuverPlan:

@@ -92,7 +92,7 @@ SWEEP_PARAMS = (
     Param("values", "any", doc="the values to run", check=_values),
     Param("label", "str", "", "column label for the value (default: the parameter name)"),
     Param("component", "str", "state", "component of the headline RMSE: position, velocity, state or a state label"),
-    Param("metric", "str", "per-run", "headline RMSE: mean of per-run RMSEs (paper P1) or pooled", choices=("per-run", "pooled")),
+    Param("metric", "str", "per-run", "headline RMSE: mean of per-run RMSEs (as Wei & Guo report) or pooled", choices=("per-run", "pooled")),
     Param("pairs", "any", [], "filter pairs [A, B] compared run by run (A − B, 95 % CI)", check=_pairs),
 )
 
