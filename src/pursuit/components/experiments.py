@@ -224,7 +224,7 @@ class MonteCarloPlan:
         keep = max(DEFAULT_KEEP_RUNS if keep is None else keep, self.figure_opts["trajectory_run"] + 1)
         result = monte_carlo(
             self.scenario, self.filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections,
-            keep_runs=keep,
+            keep_runs=keep, label=self.name,
         )
         tables = [summary_table(result)]
         consistency = consistency_table(result)

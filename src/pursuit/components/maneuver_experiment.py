@@ -286,6 +286,7 @@ class ManeuverPlan:
         result = monte_carlo(
             self.scenario, self.filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections,
             store="full",  # per-axis errors, detections and mode probabilities need every run's arrays
+            label=self.name,
         )
         axes = _axes(self.scenario)
         maneuvering = _maneuvering(self.scenario, result)

@@ -230,6 +230,7 @@ class SweepPlan:
                 result = monte_carlo(
                     scenario, filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections,
                     store="full",  # per-run RMSEs, paired comparisons and one-run figures need every run
+                    label=" ".join(filter(None, (self.name, vlabel, f"{self.label}={_fmt_value(value)}"))),
                 )
                 key = f"{vlabel}|{self.label}={_fmt_value(value)}" if vlabel else f"{self.label}={_fmt_value(value)}"
                 results[key] = result

@@ -434,6 +434,7 @@ def monte_carlo(
     backend: Any = None,
     store: str | None = None,
     keep_runs: int | None = None,
+    label: str | None = None,
 ) -> MonteCarloResult:
     """Compare filters on ``runs`` Monte Carlo runs of a scenario.
 
@@ -473,6 +474,10 @@ def monte_carlo(
         bit-identical in both modes.
     keep_runs
         Runs ``0 .. keep_runs-1`` kept whole in summary mode (default 10).
+    label
+        What the progress bar says it is computing, e.g. the experiment and
+        the swept value (default: the scenario's name).  Computed in this
+        process, the bar adds the filter running now.
 
     Returns
     -------
@@ -523,9 +528,19 @@ def monte_carlo(
         keep_runs=int(keep_runs),
     )
     spans = _chunks(runs, chunk_size)
-    bar = Progress(total=len(spans) * len(filters), label=getattr(scenario, "name", "runs"), enabled=progress is True)
+    base = label or getattr(scenario, "name", "runs")
+    in_process = isinstance(backend, Serial)
+
+    def bar_label(done: int) -> str:
+        # in process the filters of a chunk run one after the other: name the one running now
+        if in_process and done < len(spans) * len(filters):
+            return f"{base} {filters[done % len(filters)].name}"
+        return base
+
+    bar = Progress(total=len(spans) * len(filters), label=bar_label(0), enabled=progress is True)
 
     def advance(n: int) -> None:
+        bar.label = bar_label(bar.done + n)
         bar.advance(n)
         if callable(progress):
             progress(bar.done, bar.total)
