@@ -203,7 +203,7 @@ class Experiment:
             for i, entry in enumerate(entries if isinstance(entries, list) else []):
                 if isinstance(entry, dict) and e.filter_name in (entry.get("name"), entry.get("type")):
                     return f"filters[{i}].particles"
-        return {"steps": "scenario.steps"}.get(e.field, f"experiment.{e.field}")
+        return {"steps": "scenario.steps", "horizon": "scenario.horizon"}.get(e.field, f"experiment.{e.field}")
 
 
 def _nonneg_seed(field_name: str, v: int) -> int:

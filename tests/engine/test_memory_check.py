@@ -1,5 +1,6 @@
 """Refusing, before anything runs, what cannot fit in memory; chunks that are never listed."""
 
+import dataclasses
 import time
 import tracemalloc
 
@@ -30,15 +31,21 @@ def _peak(filt, runs: int) -> int:
         tracemalloc.stop()
 
 
+def _with_iterations(filt, n_iter: int):
+    return dataclasses.replace(filt, search=dataclasses.replace(filt.search, n_iter=n_iter))
+
+
 @pytest.mark.parametrize(
     "make",
     [
         lambda s: pu.BootstrapParticleFilter(s.motion, s.measurement, particles=400),
         lambda s: pu.PartialUPF(s.motion, s.measurement, particles=200, fraction=0.5),
         lambda s: pu.CSPF(s.motion, s.measurement, particles=200),
+        lambda s: _with_iterations(pu.ICSPF(s.motion, s.measurement, particles=100), 40),
+        lambda s: _with_iterations(pu.ICSPF(s.motion, s.measurement, particles=100), 0),
         lambda s: pu.UnscentedKalmanFilter(s.motion, s.measurement),
     ],
-    ids=["pf", "upf", "cspf", "ukf"],
+    ids=["pf", "upf", "cspf", "icspf-40-iterations", "icspf-0-iterations", "ukf"],
 )
 def test_working_memory_estimate_is_within_the_stated_factor_of_the_measured_peak(make):
     filt, runs = make(FIVE), 30
@@ -155,3 +162,16 @@ def test_a_gaussian_filter_is_never_told_to_lower_particles():
     with pytest.raises(MemoryNeeded) as e:
         check_memory(FIVE, small_filters(), 3, 3, store="full", keep_cov=True, available=1024)
     assert "particles" not in str(e.value) and e.value.field in ("runs", "steps")
+
+
+def test_a_maneuvering_target_with_an_enormous_horizon_is_refused_before_its_truth_is_integrated():
+    from pursuit.scenarios import ManeuveringTarget
+
+    t0 = time.perf_counter()
+    target = ManeuveringTarget(horizon=10**7)  # integrating its truth at construction took minutes
+    with pytest.raises(MemoryNeeded, match=r"^horizon: one run of 9999998 steps needs about .*lower the scenario's horizon"):
+        check_memory(target, [pu.KalmanFilter(target.motion, target.measurement)], 10, 10, store="full", keep_cov=True,
+                     available=1 << 34)
+    assert time.perf_counter() - t0 < 5
+    small = ManeuveringTarget(horizon=50)
+    assert small.true_states().shape == (50, 9) and small.true_states() is small.true_states()

@@ -239,7 +239,6 @@ class ManeuveringTarget:
         object.__setattr__(
             self, "measurement", LinearGaussian.position(3 * A, motion.position_indices, np.sqrt(self.R))
         )
-        object.__setattr__(self, "_truth", self._integrate())
 
     # -- layout ------------------------------------------------------------------
     @property
@@ -311,6 +310,16 @@ class ManeuveringTarget:
             out[i, 0::3], out[i, 1::3], out[i, 2::3] = p, v, a_now
         out.setflags(write=False)
         return out
+
+    @property
+    def _truth(self) -> np.ndarray:
+        # integrated on first use, not when built: a horizon of 10**7 took minutes in this loop at load
+        # time, before the engine could refuse it for its memory
+        truth = self.__dict__.get("_truth_cache")
+        if truth is None:
+            truth = self._integrate()
+            object.__setattr__(self, "_truth_cache", truth)
+        return truth
 
     def true_states(self) -> np.ndarray:
         """True states at t_1 … t_horizon, ``(horizon, 3A)`` (read-only)."""
