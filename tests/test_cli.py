@@ -1,6 +1,7 @@
 """The command line, end to end (in process and as a real subprocess)."""
 
 import json
+import re
 import subprocess
 import sys
 import textwrap
@@ -286,3 +287,23 @@ def test_a_signal_ignored_at_start_stays_ignored(tmp_path, config, monkeypatch):
         signal.signal(signal.SIGHUP, previous)
     assert seen[signal.SIGHUP] is signal.SIG_IGN
     assert seen[signal.SIGTERM] not in (signal.SIG_IGN, signal.SIG_DFL)  # handled while the command runs
+
+
+@pytest.mark.parametrize(
+    "args,env,msg",
+    [
+        (["--runs", "1000000000000"], {}, r"exp.toml:\d+: runs: 1000000000000 runs need about [\d.e+]+ TiB of memory"),
+        (["--runs", "100000000", "--store", "full"], {"PURSUIT_MEMORY_LIMIT": "1G"}, r"exp.toml:\d+: runs: 100000000 "
+         r"runs need about [\d.]+ GiB of memory to keep every run's arrays, 1.0 GiB available; use store summary "
+         r"\(--store summary\) or at most about \d+ runs$"),
+    ],
+)
+def test_what_cannot_fit_in_memory_is_one_line_and_exit_2(tmp_path, config, capsys, monkeypatch, args, env, msg):
+    for key, value in env.items():
+        monkeypatch.setenv(key, value)
+    out = tmp_path / "out"
+    assert main(["run", str(config), "--out", str(out), "--no-progress", *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("pursuit: error: ")
+    assert re.search(msg, err), err
+    assert not out.exists()  # refused before anything ran or was written

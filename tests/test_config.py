@@ -88,6 +88,10 @@ def test_paper_values_are_checked(tmp_path):
     bad = ok.replace('filter = "EKF"', 'filter = "PF"')
     with pytest.raises(ConfigError, match=r"paper\[0\]\.filter: no filter named 'PF'"):
         load_experiment(write(tmp_path, bad, "bad.toml"))
+    # a metric that is no summary column gave an empty "measured" cell, silently
+    typo = ok.replace('metric = "rmse_position"', 'metric = "rmse_postion"')
+    with pytest.raises(ConfigError, match=r"bad2.toml:\d+: paper\[0\]\.metric: no summary column 'rmse_postion' \(have rmse_position, "):
+        load_experiment(write(tmp_path, typo, "bad2.toml"))
 
 
 def test_missing_sections_and_files(tmp_path):

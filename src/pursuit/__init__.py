@@ -2,33 +2,88 @@
 
 from __future__ import annotations
 
+import importlib
 import os
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
-from .engine.montecarlo import monte_carlo
-from .engine.run import run
-from .examples import examples_dir
-from .filters import (
-    CSPF,
-    ICSPF,
-    SIR,
-    BootstrapParticleFilter,
-    Constant,
-    CubatureKalmanFilter,
-    CuckooSearch,
-    ExponentiallyWeighted,
-    ExtendedKalmanFilter,
-    Improved,
-    KalmanFilter,
-    PartialUPF,
-    StrongTracking,
-    UnscentedKalmanFilter,
-    rts_smooth,
-)
-from .gaussian import Gaussian
-from .results import FilterResult, MonteCarloResult
-from .rng import RunStreams
-from .track import Track
+# Public names and the modules that define them, imported on first use (PEP 562) so that
+# `import pursuit` (and so `pursuit list`, `pursuit --version`) does not load NumPy, SciPy and
+# every filter first: that took seconds.
+_LAZY = {
+    "monte_carlo": "pursuit.engine.montecarlo",
+    "run": "pursuit.engine.run",
+    **dict.fromkeys(
+        (
+            "CSPF",
+            "ICSPF",
+            "SIR",
+            "BootstrapParticleFilter",
+            "Constant",
+            "CubatureKalmanFilter",
+            "CuckooSearch",
+            "ExponentiallyWeighted",
+            "ExtendedKalmanFilter",
+            "Improved",
+            "KalmanFilter",
+            "PartialUPF",
+            "StrongTracking",
+            "UnscentedKalmanFilter",
+            "rts_smooth",
+        ),
+        "pursuit.filters",
+    ),
+    "Gaussian": "pursuit.gaussian",
+    "FilterResult": "pursuit.results",
+    "MonteCarloResult": "pursuit.results",
+    "RunStreams": "pursuit.rng",
+    "Track": "pursuit.track",
+    "examples_dir": "pursuit.examples",
+}
+
+if TYPE_CHECKING:
+    from .engine.montecarlo import monte_carlo
+    from .engine.run import run
+    from .examples import examples_dir
+    from .filters import (
+        CSPF,
+        ICSPF,
+        SIR,
+        BootstrapParticleFilter,
+        Constant,
+        CubatureKalmanFilter,
+        CuckooSearch,
+        ExponentiallyWeighted,
+        ExtendedKalmanFilter,
+        Improved,
+        KalmanFilter,
+        PartialUPF,
+        StrongTracking,
+        UnscentedKalmanFilter,
+        rts_smooth,
+    )
+    from .gaussian import Gaussian
+    from .results import FilterResult, MonteCarloResult
+    from .rng import RunStreams
+    from .track import Track
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:  # a sub-package (pursuit.filters, pursuit.scenarios, ...), as when they were imported eagerly
+        try:
+            return importlib.import_module(f"{__name__}.{name}")
+        except ModuleNotFoundError as e:
+            if e.name != f"{__name__}.{name}":
+                raise
+            raise AttributeError(f"module 'pursuit' has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
 
 __version__ = "0.1.0.dev0"
 

@@ -31,10 +31,12 @@ import warnings
 from pathlib import Path
 from typing import Sequence
 
-from . import registry
-from .experiment import ConfigError, find_experiment, list_experiments, load_experiment
+# Imports of pursuit's own modules stay inside the commands: `pursuit list` and `--version` must not
+# pay for NumPy, SciPy, matplotlib and every filter (3.3 s measured, most of it imports).
 
 __all__ = ["main"]
+
+COMMANDS = ("list", "run", "reproduce", "report", "track")
 
 EXIT_BAD_INPUT = 2
 EXIT_NO_WORKERS = 3
@@ -94,7 +96,16 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
     print(f"pursuit: warning: {message}", file=sys.stderr if file is None else file)
 
 
-def _parser() -> argparse.ArgumentParser:
+def _command(argv: Sequence[str]) -> str | None:
+    """The sub-command named on the command line (its first word that is no option), if any."""
+    for word in argv:
+        if not word.startswith("-"):
+            return word
+    return None
+
+
+def _parser(track: bool = True) -> argparse.ArgumentParser:
+    """The argument parser; ``track=False`` gives a stand-in for ``track``'s (its options import the io stack)."""
     from . import __version__
 
     p = argparse.ArgumentParser(prog="pursuit", description="Tracking and positioning filters, compared fairly.")
@@ -123,9 +134,12 @@ def _parser() -> argparse.ArgumentParser:
     rp = sub.add_parser("report", help="rebuild report.html from a saved output folder (or every folder under it)")
     rp.add_argument("dir", help="an output folder (with run.json), or a folder of them such as results/")
 
-    from .io.command import add_track_parser
+    if track:
+        from .io.command import add_track_parser
 
-    add_track_parser(sub)
+        add_track_parser(sub)
+    else:  # never parses: main builds the full parser when the command is track
+        sub.add_parser("track", help="run a configured filter on recorded or live measurements")
     return p
 
 
@@ -161,8 +175,11 @@ def _add_engine_arguments(sp: argparse.ArgumentParser) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = _parser()
+    command = _command(argv)
+    parser = _parser(track=command not in COMMANDS or command == "track")
     args = parser.parse_args(argv)
+    from .experiment import ConfigError
+
     if args.command is None:  # a bare `pursuit`: what it can do, not an argparse complaint
         parser.print_help()
         return 0
@@ -210,6 +227,15 @@ def _dispatch(args) -> int:
 
 
 def _cmd_list(args) -> int:
+    """Print the components and experiments.
+
+    Names and summaries come from :mod:`pursuit._catalog` (a test keeps it
+    equal to the registry), so listing imports no component module;
+    ``--verbose`` needs every parameter and imports them.  Experiments show
+    their title as read from the file (``pursuit run`` validates the rest).
+    """
+    from .experiment import ConfigError, find_experiment, list_experiments, read_toml
+
     kinds = {"models": "model", "filters": "filter", "scenarios": "scenario", "fading": "fading"}
     wanted = [args.kind] if args.kind else ["models", "filters", "fading", "scenarios", "experiments"]
     for plural in wanted:
@@ -217,23 +243,36 @@ def _cmd_list(args) -> int:
         if plural == "experiments":
             for name in list_experiments():
                 try:
-                    exp = load_experiment(find_experiment(name))
-                    title = exp.title
+                    _, doc = read_toml(find_experiment(name))
+                    table = doc.get("experiment")
+                    table = table if isinstance(table, dict) else {}
+                    title, reference = str(table.get("title", "")), str(table.get("reference", ""))
                 except ConfigError as e:
-                    title = f"(invalid: {e.message})"
+                    title, reference = f"(invalid: {e.message})", ""
                 print(f"  {name:<22} {title}")
+                if args.verbose and reference:
+                    print(f"      after: {reference}")
             continue
-        for comp in registry.components(kinds[plural]):
-            print(f"  {comp.name:<22} {comp.summary}")
-            if args.verbose:
+        if args.verbose:
+            from . import registry
+
+            for comp in registry.components(kinds[plural]):
+                print(f"  {comp.name:<22} {comp.summary}")
                 for p in comp.params:
                     default = "" if p.default is registry.REQUIRED else f" = {p.default!r}"
                     print(f"      {p.name} ({p.type}){default}: {p.doc}")
+        else:
+            from ._catalog import CATALOG
+
+            for name, summary in CATALOG[kinds[plural]]:
+                print(f"  {name:<22} {summary}")
         print()
     return 0
 
 
 def _check_overrides(args, source: str) -> None:
+    from .experiment import ConfigError
+
     for flag, value in (("--runs", args.runs), ("--chunk-size", args.chunk_size), ("--workers", args.workers)):
         if value is not None and value < 1:
             raise ConfigError(source, f"{flag}: must be at least 1, got {value}")
@@ -247,6 +286,7 @@ def _check_overrides(args, source: str) -> None:
 
 def _backend(args, source: str):
     from .engine.backends import make_backend
+    from .experiment import ConfigError
 
     try:
         return make_backend(workers=args.workers, scheduler=args.scheduler, worker_timeout=args.worker_timeout)
@@ -259,10 +299,10 @@ def _execute(exp, out_dir: Path, args, backend) -> None:
     from .engine.montecarlo import DEFAULT_CHUNK
     from .report.output import format_table, write_output
 
+    # the header first, so that it stands above the experiment's progress bars
+    print(f"== {exp.name}: {exp.title or exp.name}", flush=True)
     with engine_options(backend=backend, store=args.store, keep_runs=args.keep_runs):
         output = exp.run(runs=args.runs, seed=args.seed, progress=not args.no_progress, chunk_size=args.chunk_size)
-    header = exp.title or exp.name
-    print(f"== {exp.name}: {header}")
     for table in output.tables:
         print()
         print(format_table(table))
@@ -278,6 +318,8 @@ def _execute(exp, out_dir: Path, args, backend) -> None:
 
 
 def _cmd_run(args) -> int:
+    from .experiment import load_experiment
+
     _check_overrides(args, args.config)
     exp = load_experiment(args.config)
     if args.runs is not None:
@@ -289,6 +331,7 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_reproduce(args) -> int:
+    from .experiment import ConfigError, find_experiment, list_experiments, load_experiment
     from .report.html import write_index
 
     _check_overrides(args, args.name)
@@ -312,6 +355,7 @@ def _cmd_reproduce(args) -> int:
 
 
 def _cmd_report(args) -> int:
+    from .experiment import ConfigError
     from .report.html import write_index, write_report
     from .storage import iter_output_folders
 

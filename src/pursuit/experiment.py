@@ -16,10 +16,13 @@ import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from . import registry
 from .registry import Param
+
+if TYPE_CHECKING:
+    from .engine.memory import MemoryNeeded
 
 __all__ = [
     "ConfigError",
@@ -161,7 +164,16 @@ class Experiment:
         self.check_runs(runs)
         seed = self.seed if seed is None else seed
         chunk = self.chunk_size if chunk_size is None else chunk_size
-        out = self.plan.run(runs=runs, seed=seed, progress=progress, chunk_size=chunk)
+        from .engine.memory import MemoryNeeded  # here: importing the engine is slow, `pursuit list` needs none of it
+
+        try:
+            out = self.plan.run(runs=runs, seed=seed, progress=progress, chunk_size=chunk)
+        except MemoryNeeded as e:  # refused before computing: one line at the field to change
+            try:
+                text = self.path.read_text(encoding="utf-8")
+            except OSError:
+                text = ""
+            raise ConfigError(self.path, str(e), locate(text, self._memory_field(e))) from None
         out.sidecar.setdefault("experiment", self.name)
         out.sidecar.setdefault("config_file", str(self.path))
         out.sidecar.setdefault("config", self.document)
@@ -179,6 +191,19 @@ class Experiment:
         if not out.description:
             out.description = self.description
         return out
+
+
+    def _memory_field(self, e: MemoryNeeded) -> str:
+        """The file's field behind a memory refusal (for its line)."""
+        if e.field == "particles":
+            sweep = self.document.get("sweep")
+            if isinstance(sweep, dict) and sweep.get("parameter") == "particles":
+                return "sweep.values"
+            entries = self.document.get("filters")
+            for i, entry in enumerate(entries if isinstance(entries, list) else []):
+                if isinstance(entry, dict) and e.filter_name in (entry.get("name"), entry.get("type")):
+                    return f"filters[{i}].particles"
+        return {"steps": "scenario.steps", "horizon": "scenario.horizon"}.get(e.field, f"experiment.{e.field}")
 
 
 def _nonneg_seed(field_name: str, v: int) -> int:

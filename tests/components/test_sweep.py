@@ -92,6 +92,14 @@ def test_the_same_seed_gives_the_same_tables(tmp_path):
         (("n_iter = 2", "n_iter = -3"), "n_iter"),
         (('type = "ics-pf"', 'type = "ics-pff"'), "filters[1].type"),
         (("snapshot_steps = [2, 12]", "snapshot_steps = [0]"), "figures.snapshot_steps"),
+        # impossible values that were accepted silently
+        (('metric = "rmse"', 'metric = "rsme"'), "paper[0].metric: no summary column 'rsme' (have rmse, ci95, rms_x, "),
+        (("at = 40", "at = 30"), "paper[0].at: 30 is not a swept value (sweep.values = [20, 40])"),
+        (('name = "PF"\n', 'name = "PF"\nparticles = 500\n'), "filters[0].particles: set here but swept by [sweep]"),
+        (("[figures]\nvalues = [40]", "[figures]\nvalues = [nan]"), "figures.values: expected finite numbers, got nan"),
+        (("[figures]\nvalues = [40]", "[figures]\nvalues = [30]"), "figures.values[0]: 30 is not a swept value"),
+        (("snapshot_steps = [2, 12]", "snapshot_steps = [2, 12]\nsnapshot_value = 25"), "figures.snapshot_value: 25 is"),
+        (("values = [20, 40]", "values = [20, inf]"), "sweep.values: expected finite numbers, got inf"),
     ],
 )
 def test_bad_sweep_files_name_the_field(tmp_path, edit, field):

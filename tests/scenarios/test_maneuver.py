@@ -83,6 +83,7 @@ def test_runs_are_independent_of_the_batch_they_are_simulated_in():
         ([{"start": 1, "stop": 2}], r"maneuvers\[0\]: a maneuver needs exactly one"),
         ([{"plane": "xy", "start": 1, "stop": 5, "rate": 1.0}, {"axis": "y", "start": 3, "stop": 4}], "overlaps"),
         ("fast", "list of maneuver tables"),
+        ([{"axis": "x", "start": -5, "stop": 2}], r"maneuvers\[0\]\.start: must be at least 0 s \(the truth starts at t = 0\), got -5"),
     ],
 )
 def test_bad_schedules_name_the_entry(entries, match):

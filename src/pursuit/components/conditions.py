@@ -147,6 +147,7 @@ class ConditionsPlan:
             results[cond.name] = monte_carlo(
                 cond.scenario, cond.filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections,
                 store="full",  # the paired per-run statistics need every run's errors
+                label=f"{self.name} {cond.name}",
             )
         tables = [self._rmse_table(results), self._improvement_table(results)]
         if self.paper:

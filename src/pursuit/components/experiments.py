@@ -126,6 +126,17 @@ def resolve_paper(
 CONSISTENCY_COLUMNS = ("anees", "anees_low", "anees_high", "anees_inside", "anis", "anis_low", "anis_high", "anis_inside")
 
 
+def summary_columns(scenario: Any) -> list[str]:
+    """The columns of :meth:`MonteCarloResult.summary` for this scenario (what a ``[[paper]]`` metric may name)."""
+    cols = []
+    if scenario.position_indices:
+        cols.append("rmse_position")
+    if scenario.velocity_indices:
+        cols.append("rmse_velocity")
+    cols += [f"rms_{label}" for label in scenario.state_labels]
+    return [*cols, *CONSISTENCY_COLUMNS, "wall_time_s", "runs"]
+
+
 def summary_table(result: MonteCarloResult, name: str = "summary", title: str = "") -> Table:
     """Errors and run time per filter as a :class:`Table` (consistency is in :func:`consistency_table`)."""
     rows = result.summary()
@@ -213,7 +224,7 @@ class MonteCarloPlan:
         keep = max(DEFAULT_KEEP_RUNS if keep is None else keep, self.figure_opts["trajectory_run"] + 1)
         result = monte_carlo(
             self.scenario, self.filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections,
-            keep_runs=keep,
+            keep_runs=keep, label=self.name,
         )
         tables = [summary_table(result)]
         consistency = consistency_table(result)
@@ -241,4 +252,8 @@ def _montecarlo(sections: dict[str, Any], path: Path, name: str) -> MonteCarloPl
     filters = build_filters(sections, scenario)
     figure_opts = resolve_section(sections, "figures", FIGURE_PARAMS)
     paper = resolve_paper(sections, [f.name for f in filters])
+    columns = summary_columns(scenario)
+    for i, vals in enumerate(paper):
+        if vals["metric"] not in columns:
+            raise ValueError(f"paper[{i}].metric: no summary column {vals['metric']!r} (have {', '.join(columns)})")
     return MonteCarloPlan(name, scenario, filters, figure_opts, paper, sections)

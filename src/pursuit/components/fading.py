@@ -16,7 +16,7 @@ LAM_MAX_PARAM = Param("lam_max", "float", LAM_MAX, "upper bound on the fading fa
 @register(
     "fading",
     "ewfmkf",
-    "Exponentially weighted adaptive fading factor (EWFMKF, paper P2 baseline; reconstruction)",
+    "Exponentially weighted adaptive fading factor (EWFMKF), the baseline of Ma & Zheng's underwater TOA paper, as we reconstructed it",
     params=(Param("b", "float", 0.95, "forgetting factor in (0, 1); larger remembers longer"), LAM_MAX_PARAM),
     aliases=("exponentially-weighted",),
 )
@@ -42,7 +42,7 @@ def _stf(**kw) -> StrongTracking:
 @register(
     "fading",
     "ifmkf",
-    "Improved fading memory (IFMKF, paper P2): fade only on abnormal divergence, just enough to fit the observation",
+    "Improved fading memory (IFMKF; Ma & Zheng, \"Improvement of memory fading filter applied in the underwater acoustic location algorithm\"): fade only on abnormal divergence, just enough to fit the observation",
     params=(
         Param("beta", "float", 3.0, "reserve coefficient of the divergence threshold beta*(w' + v)"),
         Param("window", "int", 5, "window length L of the divergence test"),

@@ -56,7 +56,7 @@ TFMKF_LAMBDA = 1.23
 @register(
     "fading",
     "tfmkf",
-    f"Constant fading factor of paper P2's TFMKF, λ = {TFMKF_LAMBDA} unless given",
+    f"Constant fading factor λ = {TFMKF_LAMBDA} unless given (the TFMKF of Ma & Zheng's underwater TOA paper)",
     params=(Param("lam", "float", TFMKF_LAMBDA, "fading factor, at least 1"),),
 )
 def _tfmkf(lam: float = TFMKF_LAMBDA) -> Constant:

@@ -60,7 +60,7 @@ _DEFAULT_TABLES = [{"axis": m.axis, "start": m.start, "stop": m.stop, "accel": m
 @register(
     "scenario",
     "maneuver-3d",
-    "Target maneuvering on a schedule in up to 3 axes, position measured per axis (paper P4); state [x, vx, ax, ...]",
+    "Target maneuvering on a schedule of accelerations and turns in up to 3 axes, position measured per axis; state [x, vx, ax, ...]",
     params=(
         Param("horizon", "int", 100, "measurement epochs including the two for initialisation (filter steps = horizon - 2)"),
         Param("dt", "float", 1.0, "sampling period, s"),
@@ -71,7 +71,7 @@ _DEFAULT_TABLES = [{"axis": m.axis, "start": m.start, "stop": m.stop, "accel": m
             "maneuvers",
             "any",
             _DEFAULT_TABLES,
-            "[[scenario.maneuvers]] tables: {axis, start, stop, accel} or {plane, start, stop, rate (deg/s)}; default: spec 04 schedule",
+            "[[scenario.maneuvers]] tables: {axis, start, stop, accel} or {plane, start, stop, rate (deg/s)}; default: a schedule of accelerations on all three axes (see docs/maneuvering.md)",
             check=_schedule,
         ),
         Param("init", "str", "two-point", "prior: two-point differencing or sampled from N(truth, P0)", choices=("two-point", "sampled")),
@@ -115,7 +115,7 @@ def _cs(scenario, where="filter", name=None, **kw):
 @register(
     "filter",
     "apcs",
-    "Parameter-adaptive CS filter of paper P4 (displacement-based variance, chi-square maneuver detection, fading and alpha)",
+    "Parameter-adaptive current-statistical filter (Fang & Yang, \"Maneuvering target tracking algorithm based on parameter-adaptive CS model\"): displacement-based variance, chi-square maneuver detection, fading and alpha",
     params=(
         NAME,
         Param("alpha0", "float", 0.001, "maneuver frequency without maneuver, 1/s"),

@@ -286,6 +286,7 @@ class ManeuverPlan:
         result = monte_carlo(
             self.scenario, self.filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections,
             store="full",  # per-axis errors, detections and mode probabilities need every run's arrays
+            label=self.name,
         )
         axes = _axes(self.scenario)
         maneuvering = _maneuvering(self.scenario, result)
@@ -330,7 +331,7 @@ class ManeuverPlan:
 @register(
     "experiment",
     "maneuver",
-    "Maneuvering-target comparison with per-axis RMSE, maneuver segments and paper P4's claims; "
+    "Maneuvering-target comparison with per-axis RMSE, maneuver segments and the claims of Fang & Yang's paper; "
     "sections [scenario], [[filters]], [figures], [claims]",
 )
 def _maneuver(sections: dict[str, Any], path: Path, name: str) -> ManeuverPlan:

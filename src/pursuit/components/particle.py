@@ -60,7 +60,7 @@ def _pf(
 @register(
     "filter",
     "upf",
-    "Partial-UKF unscented particle filter (patent P3): a fraction l of the particles get a UKF proposal",
+    "Partial-UKF unscented particle filter (patent CN101631395B): a fraction l of the particles get a UKF proposal",
     params=(
         NAME,
         _PARTICLES,
@@ -114,7 +114,7 @@ def _cuckoo_filter(cls, scenario, where, name, particles, search_kw, common):
 @register(
     "filter",
     "cs-pf",
-    "Cuckoo-search PF (paper P1's CS-PF): fixed step size and discovery probability",
+    "Cuckoo-search particle filter (CS-PF): particles moved by Lévy flights with a fixed step size and discovery probability",
     params=(
         NAME,
         _PARTICLES,
@@ -131,7 +131,7 @@ def _cs_pf(scenario, where="filter", name=None, particles=1000, alpha=0.01, pa=0
 @register(
     "filter",
     "ics-pf",
-    "Improved cuckoo-search PF (paper P1): shrinking step size and Pa, fitness-trend step",
+    "Improved cuckoo-search particle filter (Wei & Guo, \"WSN target tracking based on improved cuckoo particle filter algorithm\"): shrinking step size and Pa, fitness-trend step",
     params=(
         NAME,
         _PARTICLES,
@@ -168,7 +168,7 @@ def _ics_pf(
 @register(
     "scenario",
     "ungm",
-    "Univariate nonstationary growth model (Gordon et al. 1993; paper P1 §4.1); state [x]",
+    "Univariate nonstationary growth model, the classic nonlinear benchmark (Gordon, Salmond & Smith 1993); state [x]",
     params=(
         Param("steps", "int", 50, "number of measurement steps K"),
         Param("q", "float", 1.0, "process-noise variance Q"),

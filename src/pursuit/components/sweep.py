@@ -28,6 +28,8 @@ paired differences are run by run.
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -58,6 +60,8 @@ def _values(field_name: str, v: Any) -> list:
     for x in v:
         if isinstance(x, bool) or not isinstance(x, (int, float)):
             raise ValueError(f"{field_name}: expected numbers, got {x!r}")
+        if not math.isfinite(x):
+            raise ValueError(f"{field_name}: expected finite numbers, got {x!r}")
     return list(v)
 
 
@@ -88,7 +92,7 @@ SWEEP_PARAMS = (
     Param("values", "any", doc="the values to run", check=_values),
     Param("label", "str", "", "column label for the value (default: the parameter name)"),
     Param("component", "str", "state", "component of the headline RMSE: position, velocity, state or a state label"),
-    Param("metric", "str", "per-run", "headline RMSE: mean of per-run RMSEs (paper P1) or pooled", choices=("per-run", "pooled")),
+    Param("metric", "str", "per-run", "headline RMSE: mean of per-run RMSEs (as Wei & Guo report) or pooled", choices=("per-run", "pooled")),
     Param("pairs", "any", [], "filter pairs [A, B] compared run by run (A − B, 95 % CI)", check=_pairs),
 )
 
@@ -226,6 +230,7 @@ class SweepPlan:
                 result = monte_carlo(
                     scenario, filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections,
                     store="full",  # per-run RMSEs, paired comparisons and one-run figures need every run
+                    label=" ".join(filter(None, (self.name, vlabel, f"{self.label}={_fmt_value(value)}"))),
                 )
                 key = f"{vlabel}|{self.label}={_fmt_value(value)}" if vlabel else f"{self.label}={_fmt_value(value)}"
                 results[key] = result
@@ -403,6 +408,30 @@ class SweepPlan:
 _KNOWN_SECTIONS = {"scenario", "filters", "sweep", "variants", "figures", "paper"}
 
 
+def _is_swept(value: float, values: list) -> bool:
+    return any(float(value) == float(v) for v in values)
+
+
+def _check_swept_values(values: list, figure_opts: dict[str, Any]) -> None:
+    """``figures.values`` and ``figures.snapshot_value`` must name swept values (else no figure, silently)."""
+    for i, v in enumerate(figure_opts["values"]):
+        if not _is_swept(v, values):
+            raise ValueError(f"figures.values[{i}]: {v:g} is not a swept value (sweep.values = {values})")
+    snap = figure_opts["snapshot_value"]
+    if snap is not None and not (math.isfinite(snap) and _is_swept(snap, values)):
+        raise ValueError(f"figures.snapshot_value: {snap:g} is not a swept value (sweep.values = {values})")
+
+
+def _summary_columns(scenario: Any) -> list[str]:
+    """The columns of the sweep's summary rows (see ``SweepPlan._row``) a ``[[paper]]`` metric may name."""
+    cols = ["rmse", "ci95", *[f"rms_{lbl}" for lbl in scenario.state_labels]]
+    if scenario.position_indices:
+        cols.append("rmse_position")
+    if scenario.velocity_indices:
+        cols.append("rmse_velocity")
+    return [*cols, "nis_mean", "ess_mean", "resample_rate", "wall_time_s", "runs"]
+
+
 @register(
     "experiment",
     "sweep",
@@ -432,18 +461,30 @@ def _sweep(sections: dict[str, Any], path: Path, name: str) -> SweepPlan:
     swept = [registry.get("filter", e["type"], f"filters[{i}].type").param(sweep["parameter"]) is not None for i, e in enumerate(entries)]
     if not any(swept):
         raise ValueError(f"sweep.parameter: no filter has a parameter {sweep['parameter']!r}")
+    for i, (entry, takes) in enumerate(zip(entries, swept)):
+        if takes and sweep["parameter"] in entry:  # it would be replaced by every swept value, unseen
+            raise ValueError(
+                f"filters[{i}].{sweep['parameter']}: set here but swept by [sweep] (values {sweep['values']}); "
+                "remove it from the filter"
+            )
     plan = SweepPlan(name, sections, sweep, figure_opts, [], variants, swept)
     try:
         plan.validate()
     except ValueError as e:
         raise ValueError(f"sweep.values: {e}") from None
+    _check_swept_values(sweep["values"], figure_opts)
     names = set()
     for variant in variants or [None]:
         names.update(f.name for f in plan._filters(plan._scenario(variant), sweep["values"][0], True))
     paper = resolve_paper(sections, names, PAPER_PARAMS)
+    columns = _summary_columns(scenario)
     for i, vals in enumerate(paper):
         if variants and vals["variant"] not in labels:
             raise ValueError(f"paper[{i}].variant: no variant labelled {vals['variant']!r}")
+        if vals["metric"] not in columns:
+            raise ValueError(f"paper[{i}].metric: no summary column {vals['metric']!r} (have {', '.join(columns)})")
+        if vals["at"] is not None and not _is_swept(vals["at"], sweep["values"]):
+            raise ValueError(f"paper[{i}].at: {vals['at']:g} is not a swept value (sweep.values = {sweep['values']})")
     plan.paper = paper
     for i, (a, b) in enumerate(sweep["pairs"]):
         for n in (a, b):

@@ -10,9 +10,9 @@ from .scenarios import _checked
 @register(
     "scenario",
     "underwater-toa",
-    "Underwater TOA positioning with an L-shaped three-hydrophone array (paper P2); conditions ideal, actual, abnormal",
+    "Underwater TOA positioning with an L-shaped three-hydrophone array (Ma & Zheng 2022); conditions ideal, actual, abnormal",
     params=(
-        Param("condition", "str", "ideal", "paper P2's condition; sets initial_error, mismatch and outlier_time", choices=tuple(CONDITIONS)),
+        Param("condition", "str", "ideal", "the paper's test condition; sets initial_error, mismatch and outlier_time", choices=tuple(CONDITIONS)),
         Param("mode", "str", "ranges", "what the filter receives: ranges (m), travel times (s) or the closed-form position fix", choices=MODES),
         Param("d", "float", 50.0, "array spacing, m: A(0,0), B(0,d), C(d,0)"),
         Param("c", "float", 1500.0, "sound speed, m/s"),

@@ -19,6 +19,7 @@ chunking, and equal to those computed from the full arrays.
 from __future__ import annotations
 
 import time
+from collections import abc
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Sequence
 
@@ -29,6 +30,7 @@ from ..reduction import PartialStatistics, StatisticsAccumulator, component_grou
 from ..results import STORE_MODES, FilterResult, MonteCarloResult
 from ..rng import run_streams
 from .backends import Serial, current_options, make_backend
+from .memory import INFO_SCALARS, _measurement_dim, check_memory, result_bytes_full  # noqa: F401 (re-exported)
 from .progress import Progress
 from .run import run
 
@@ -97,8 +99,45 @@ def run_chunk(
     return ChunkResult(start, stop, sim.times, sim.truth, sim.measurements, tracks)
 
 
-def _chunks(runs: int, chunk_size: int) -> list[tuple[int, int]]:
-    return [(s, min(s + chunk_size, runs)) for s in range(0, runs, chunk_size)]
+class Spans(abc.Sequence):
+    """The chunks ``(start, stop)`` of ``runs`` runs, computed when asked for, never listed.
+
+    A sequence (``len``, indexing, iteration, ``in``) that holds two
+    integers: a billion chunks cost no memory until a backend walks them.
+    """
+
+    def __init__(self, runs: int, chunk_size: int):
+        self.runs, self.chunk_size = int(runs), int(chunk_size)
+
+    def __len__(self) -> int:
+        return -(-self.runs // self.chunk_size)
+
+    def __getitem__(self, i: Any) -> Any:
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(len(self)))]
+        if i < 0:
+            i += len(self)
+        if not 0 <= i < len(self):
+            raise IndexError(f"chunk {i} of {len(self)}")
+        start = i * self.chunk_size
+        return (start, min(start + self.chunk_size, self.runs))
+
+    def __contains__(self, span: object) -> bool:
+        if not isinstance(span, tuple) or len(span) != 2:
+            return False
+        start, stop = span
+        return (
+            isinstance(start, int) and 0 <= start < self.runs and start % self.chunk_size == 0
+            and stop == min(start + self.chunk_size, self.runs)
+        )
+
+    def __iter__(self):
+        for start in range(0, self.runs, self.chunk_size):
+            yield (start, min(start + self.chunk_size, self.runs))
+
+
+def _chunks(runs: int, chunk_size: int) -> Spans:
+    return Spans(runs, chunk_size)
 
 
 @dataclass
@@ -358,42 +397,18 @@ def validate_filters(filters: Sequence[Any]) -> list[Any]:
     return filters
 
 
-def _measurement_dim(scenario: Any, n: int) -> int:
-    """The measurement dimension m of the scenario's model (``dim``, else the size of ``cov(1)``, else n)."""
-    model = getattr(scenario, "measurement", None)
-    dim = getattr(model, "dim", None)
-    if isinstance(dim, (int, np.integer)) and not isinstance(dim, bool):
-        return int(dim)
-    try:
-        return int(np.shape(model.cov(1))[-1])
-    except Exception:  # a user's model without dim or cov(k): the state dimension is a fair guess
-        return n
-
-
-INFO_SCALARS = 8
-"""Scalar step-info values per run and step counted by the estimate (NIS, dof, log-likelihood, fading
-factor or ESS, flags ...: the bundled filters keep 4 to 10, some of them one byte)."""
-
-
 def _estimated_bytes(scenario: Any, filters: Sequence[Any], runs: int, keep_cov: bool) -> int:
-    """Bytes of the arrays a full-mode result holds.
+    """Bytes of the arrays a full-mode result holds (see :func:`pursuit.engine.memory.result_bytes_full`).
 
-    Per run and step, in float64: truth (n), measurements (m), and per filter
-    its estimates (n), covariances (n², when kept) and step info: the
-    innovation (m), its covariance S (m²) and :data:`INFO_SCALARS` scalars.
     The real size was 0.73-1.07 times this for each filter of the bundled
     experiments (0.86-1.03 for each experiment's filters together);
     ``tests/engine/test_memory.py`` checks 0.7-1.1.  While it runs, the engine
     also holds the chunks in flight and the filters' working memory for one
     chunk (each chunk is copied into the result as it arrives and dropped,
-    see :class:`FullCollector`), which grows with the chunk size, not with
-    the number of runs.
+    see :class:`FullCollector`); :func:`pursuit.engine.memory.check_memory`
+    counts those too before anything runs.
     """
-    n = len(scenario.state_labels)
-    m = _measurement_dim(scenario, n)
-    steps = int(getattr(scenario, "steps", 100))
-    per_filter = n + (n * n if keep_cov else 0) + m + m * m + INFO_SCALARS
-    return 8 * steps * runs * (n + m + len(filters) * per_filter)
+    return result_bytes_full(scenario, len(filters), runs, keep_cov)
 
 
 def resolve_store(store: str, scenario: Any, filters: Sequence[Any], runs: int, keep_cov: bool) -> str:
@@ -419,6 +434,7 @@ def monte_carlo(
     backend: Any = None,
     store: str | None = None,
     keep_runs: int | None = None,
+    label: str | None = None,
 ) -> MonteCarloResult:
     """Compare filters on ``runs`` Monte Carlo runs of a scenario.
 
@@ -458,6 +474,10 @@ def monte_carlo(
         bit-identical in both modes.
     keep_runs
         Runs ``0 .. keep_runs-1`` kept whole in summary mode (default 10).
+    label
+        What the progress bar says it is computing, e.g. the experiment and
+        the swept value (default: the scenario's name).  Computed in this
+        process, the bar adds the filter running now.
 
     Returns
     -------
@@ -469,6 +489,7 @@ def monte_carlo(
     filters = validate_filters(filters)
     chunk_size = positive_int("chunk_size", DEFAULT_CHUNK if chunk_size is None else chunk_size)
     opts = current_options()
+    can_summarise = store is None  # a caller that asked for a mode (a sweep needs every run) keeps it
     store = resolve_store(store or opts.store or "auto", scenario, filters, runs, keep_cov)
     keep_runs = opts.keep_runs if keep_runs is None else keep_runs
     keep_runs = DEFAULT_KEEP_RUNS if keep_runs is None else keep_runs
@@ -484,6 +505,19 @@ def monte_carlo(
     elif isinstance(backend, str):
         backend = owned = make_backend(scheduler=backend)
 
+    # Refuse what cannot fit before computing anything (one line naming the setting to change).
+    # A local pool computes up to `workers` chunks at once, each in its own process on this machine.
+    workers = getattr(backend, "workers", None)
+    try:
+        check_memory(
+            scenario, filters, runs, chunk_size, store=store, keep_cov=keep_cov,
+            in_flight=workers if isinstance(workers, int) and not isinstance(backend, Serial) else 1,
+            can_summarise=can_summarise,
+        )
+    except BaseException:
+        if owned is not None:
+            owned.close()
+        raise
     task = ChunkTask(
         scenario,
         tuple(filters),
@@ -494,9 +528,19 @@ def monte_carlo(
         keep_runs=int(keep_runs),
     )
     spans = _chunks(runs, chunk_size)
-    bar = Progress(total=len(spans) * len(filters), label=getattr(scenario, "name", "runs"), enabled=progress is True)
+    base = label or getattr(scenario, "name", "runs")
+    in_process = isinstance(backend, Serial)
+
+    def bar_label(done: int) -> str:
+        # in process the filters of a chunk run one after the other: name the one running now
+        if in_process and done < len(spans) * len(filters):
+            return f"{base} {filters[done % len(filters)].name}"
+        return base
+
+    bar = Progress(total=len(spans) * len(filters), label=bar_label(0), enabled=progress is True)
 
     def advance(n: int) -> None:
+        bar.label = bar_label(bar.done + n)
         bar.advance(n)
         if callable(progress):
             progress(bar.done, bar.total)
@@ -507,11 +551,14 @@ def monte_carlo(
     else:
         collector = FullCollector(scenario, filters, int(seed), config, runs)
 
+    seen: set[tuple[int, int]] = set()  # a set: checking the collector's list made k chunks cost k²
+
     def on_result(span: tuple[int, int], part: Any) -> None:
-        if span in collector.spans:
+        if span in seen:
             raise RuntimeError(f"the backend returned runs {span[0]}..{span[1] - 1} twice")
         # summary: folded in and dropped, memory stays bounded by the chunk size;
         # full: copied into the result's arrays and dropped, so the runs are not held twice
+        seen.add(span)
         collector.add(part)
         if not isinstance(backend, Serial):
             advance(len(filters))
@@ -525,7 +572,7 @@ def monte_carlo(
         bar.close()
         if owned is not None:
             owned.close()
-    missing = sorted(set(spans) - set(collector.spans))
-    if missing:
+    if len(seen) != len(spans):
+        missing = [span for span in spans if span not in seen]
         raise RuntimeError(f"the backend returned no result for runs {missing[0][0]}..{missing[-1][1] - 1}")
     return collector.result()

@@ -8,6 +8,9 @@ from typing import TextIO
 
 __all__ = ["Progress"]
 
+LABEL_WIDTH = 36
+"""Characters of the label shown (experiment, swept value and filter: ``p1-ungm N=100 ICS-PF``)."""
+
 
 class Progress:
     """Count units of work and redraw one status line.
@@ -52,7 +55,7 @@ class Progress:
         elapsed = time.monotonic() - self._start
         eta = elapsed / frac - elapsed if frac > 0 else float("nan")
         eta_s = f"{eta:5.0f}s left" if frac > 0 and frac < 1 else f"{elapsed:5.1f}s"
-        line = f"\r{self.label[:24]:<24} [{'#' * filled}{'.' * (width - filled)}] {100 * frac:5.1f}% {eta_s}"
+        line = f"\r{self.label[:LABEL_WIDTH]:<{LABEL_WIDTH}} [{'#' * filled}{'.' * (width - filled)}] {100 * frac:5.1f}% {eta_s}"
         self.stream.write(line)
         self.stream.flush()
 

@@ -71,6 +71,8 @@ class Maneuver:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
                 raise ValueError(f"{name}: expected a finite number, got {v!r}")
+        if self.start < 0:  # the truth starts at t = 0: a segment before it is a typo or a shifted schedule
+            raise ValueError(f"start: must be at least 0 s (the truth starts at t = 0), got {self.start}")
         if self.stop < self.start:
             raise ValueError(f"stop: must not be before start ({self.start}), got {self.stop}")
 
@@ -237,7 +239,6 @@ class ManeuveringTarget:
         object.__setattr__(
             self, "measurement", LinearGaussian.position(3 * A, motion.position_indices, np.sqrt(self.R))
         )
-        object.__setattr__(self, "_truth", self._integrate())
 
     # -- layout ------------------------------------------------------------------
     @property
@@ -309,6 +310,16 @@ class ManeuveringTarget:
             out[i, 0::3], out[i, 1::3], out[i, 2::3] = p, v, a_now
         out.setflags(write=False)
         return out
+
+    @property
+    def _truth(self) -> np.ndarray:
+        # integrated on first use, not when built: a horizon of 10**7 took minutes in this loop at load
+        # time, before the engine could refuse it for its memory
+        truth = self.__dict__.get("_truth_cache")
+        if truth is None:
+            truth = self._integrate()
+            object.__setattr__(self, "_truth_cache", truth)
+        return truth
 
     def true_states(self) -> np.ndarray:
         """True states at t_1 … t_horizon, ``(horizon, 3A)`` (read-only)."""
