@@ -224,14 +224,13 @@ def test_workers_that_keep_dying_are_one_line_and_exit_3(tmp_path, config, capsy
     """Every worker dies (as when the system kills them): one warning line per restart, then one error line."""
     import dataclasses
 
-    from pursuit import cli
     from pursuit.experiment import load_experiment
 
     from .engine.helpers import KillsItsWorker
 
     exp = load_experiment(config)
     exp = dataclasses.replace(exp, plan=dataclasses.replace(exp.plan, scenario=KillsItsWorker(exp.plan.scenario)))
-    monkeypatch.setattr(cli, "load_experiment", lambda path: exp)
+    monkeypatch.setattr("pursuit.experiment.load_experiment", lambda path: exp)  # cli imports it when it runs
     out = tmp_path / "out"
     assert main(["run", str(config), "--out", str(out), "--workers", "2", "--no-progress"]) == 3
     err = capsys.readouterr().err.splitlines()

@@ -188,8 +188,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         from .compute import set_default_backend
 
         set_default_backend(args.compute_backend)
-    from .engine.backends import WorkerLost
-
     try:
         with _signals_unwind(), warnings.catch_warnings():
             warnings.showwarning = _show_warning  # restored by catch_warnings
@@ -197,9 +195,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ConfigError as e:
         print(f"pursuit: error: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except WorkerLost as e:
-        print(f"pursuit: error: {e}", file=sys.stderr)
-        return EXIT_NO_WORKERS
     except BrokenPipeError:  # output piped into head and closed
         return 0
     except KeyboardInterrupt:
@@ -208,6 +203,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Terminated as e:
         print(f"pursuit: stopped by {signal.Signals(e.signum).name}", file=sys.stderr)
         return 128 + e.signum
+    except Exception as e:
+        if not _workers_lost(e):
+            raise
+        print(f"pursuit: error: {e}", file=sys.stderr)
+        return EXIT_NO_WORKERS
+
+
+def _workers_lost(e: Exception) -> bool:
+    """Whether ``e`` is the engine's ``WorkerLost``, without importing the engine (and NumPy) to ask.
+
+    A command that never loaded the engine cannot have lost a worker; this keeps
+    ``pursuit list`` and ``--version`` free of the numerical libraries.
+    """
+    backends = sys.modules.get("pursuit.engine.backends")
+    return backends is not None and isinstance(e, backends.WorkerLost)
 
 
 def _dispatch(args) -> int:
