@@ -172,3 +172,18 @@ def test_a_track_model_given_to_run_and_an_experiment_given_to_track_say_which_c
     assert f"this is a `pursuit track` model file, not an experiment: run it as pursuit track DATA --config {model}" in capsys.readouterr().err
     assert main(["track", str(root / "examples" / "data" / "wsn-range.csv"), "-c", str(experiment)]) == 2
     assert f"this is an experiment file, not a `pursuit track` model file: run it as pursuit run {experiment}" in capsys.readouterr().err
+
+
+def test_output_is_light_unless_full_data_is_asked_for(tmp_path):
+    import csv
+
+    p = tmp_path / "exp.toml"
+    p.write_text(GOOD.replace("runs = 3", "runs = 6"))
+    assert main(["run", str(p), "--no-progress", "--no-pdf", "--keep-runs", "2", "-o", str(tmp_path / "light")]) == 0
+    assert main(["run", str(p), "--no-progress", "--no-pdf", "--keep-runs", "2", "--full-data", "-o", str(tmp_path / "full")]) == 0
+    runs = {}
+    for kind in ("light", "full"):
+        with (tmp_path / kind / "errors.csv").open() as fh:
+            runs[kind] = sorted({int(r["run"]) for r in csv.DictReader(fh)})
+    assert runs == {"light": [0, 1], "full": [0, 1, 2, 3, 4, 5]}
+    assert (tmp_path / "light" / "per_step.csv").read_bytes() == (tmp_path / "full" / "per_step.csv").read_bytes()
