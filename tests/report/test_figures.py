@@ -124,3 +124,17 @@ def test_sweep_baselines_are_named_in_the_legend_not_overprinted():
     base = [ln for ln in _series(ax) if "baseline" in ln.get_label()]
     assert len({(str(ln.get_linestyle()), ln.get_color()) for ln in base}) == 2
     assert ax.get_xlabel() == "UKF fraction l"
+
+
+@pytest.mark.parametrize("low, high, expected", [(2.1e-3, 2.7e-3, "0.0025"), (0.5, 3e4, "10000"), (1.2, 6.5, "3")])
+def test_log_tick_labels_are_plain_numbers(low, high, expected):
+    from pursuit.report.figures import plain_log_ticks
+
+    fig = Figure()
+    ax = fig.add_subplot()
+    ax.plot([0, 1], [low, high])
+    ax.set_yscale("log")
+    plain_log_ticks(ax)
+    fig.draw_without_rendering()
+    texts = [t.get_text() for t in (*ax.get_yticklabels(), *ax.get_yticklabels(minor=True)) if t.get_text()]
+    assert expected in texts and not any("e+" in t or "times" in t for t in texts), texts

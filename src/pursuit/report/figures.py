@@ -119,7 +119,8 @@ class _PlainLogFormatter(ticker.LogFormatter):
     """Matplotlib's choice of which log ticks to label, written as plain numbers with up to four digits."""
 
     def _num_to_string(self, x: float, vmin: float, vmax: float) -> str:
-        return f"{x:.4g}"
+        text = f"{x:.4g}"
+        return f"{x:.0f}" if "e" in text and 1.0 <= abs(x) < 1e7 else text  # 10000, not 1e+04
 
 
 def plain_log_ticks(ax, axis: str = "y") -> None:
