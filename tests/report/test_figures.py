@@ -138,3 +138,30 @@ def test_log_tick_labels_are_plain_numbers(low, high, expected):
     fig.draw_without_rendering()
     texts = [t.get_text() for t in (*ax.get_yticklabels(), *ax.get_yticklabels(minor=True)) if t.get_text()]
     assert expected in texts and not any("e+" in t or "times" in t for t in texts), texts
+
+
+def test_consistency_figure_of_a_diverged_filter_draws_and_says_where_it_clipped(twins):
+    import copy
+
+    broken = copy.deepcopy(twins)
+    name = broken.filter_names[0]
+    fr = broken.filters[name]
+    fr.estimates[5:] = 1e100  # diverged: NEES ~1e200
+    broken.statistics = None  # recompute from the arrays
+    assert np.nanmax(broken.anees(name)) > 1e150
+    fig = consistency_over_time(broken)
+    fig.canvas.print_figure(__import__("io").BytesIO(), format="png")
+    ax = fig.get_axes()[0]
+    notes = [t.get_text() for t in ax.texts]
+    assert any(name in n and "1e+12" in n for n in notes), notes
+    drawn = next(ln for ln in _series(ax) if ln.get_label().split(" (")[0] == name).get_ydata()
+    assert np.nanmax(drawn) == 1e12
+
+
+def test_log_tick_at_infinity_gets_no_label():
+    """An axis stretched to the float limit asks for a label at inf (p1-wsn's ICS-PF): '' rather than OverflowError."""
+    from pursuit.report.figures import _PlainLogFormatter
+
+    fmt = _PlainLogFormatter()
+    fmt.set_axis(Figure().add_subplot().yaxis)
+    assert fmt(np.inf) == "" and fmt(0.0) == ""

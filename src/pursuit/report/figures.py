@@ -33,6 +33,8 @@ MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
 COINCIDE = 0.01
 COINCIDE_SHARE = 0.9
 MARKS_PER_LINE = 10
+# ANEES/ANIS above this are drawn at it (and the panel says so): a diverged filter reaches 1e300 or inf
+CONSISTENCY_CAP = 1e12
 
 
 def _new(width: float = 7.6, height: float = 4.0) -> tuple[Figure, object]:
@@ -117,6 +119,10 @@ def legend_beside(ax, **kw) -> None:
 
 class _PlainLogFormatter(ticker.LogFormatter):
     """Matplotlib's choice of which log ticks to label, written as plain numbers with up to four digits."""
+
+    def __call__(self, x: float, pos: int | None = None) -> str:
+        # an axis stretched to the float limit by a diverged filter puts a tick at inf: no label, no crash
+        return super().__call__(x, pos) if np.isfinite(x) and x > 0 else ""
 
     def _num_to_string(self, x: float, vmin: float, vmax: float) -> str:
         text = f"{x:.4g}"
@@ -355,12 +361,23 @@ def consistency_over_time(
     for ax, (what, have) in zip(axs, panels):
         band = result.consistency_bounds(have[0][0], what, level)
         ax.fill_between(t, *band, color="0.5", alpha=0.22, linewidth=0, label=f"χ² {100 * level:g} % band")
+        clipped = []
         for name, values in have:
+            values = np.asarray(values, dtype=float)
+            # a diverged filter's ANEES reaches 1e300 or inf and would stretch the axis past the float range
+            over = ~np.isfinite(values) | (values > CONSISTENCY_CAP)
+            if np.any(over & ~np.isnan(values)):
+                clipped.append(name)
+                values = np.where(over & ~np.isnan(values), CONSISTENCY_CAP, values)
             (line,) = ax.plot(t, values, label=name, linewidth=1.3)
             lo, hi = result.consistency_bounds(name, what, level)
             if not (np.array_equal(lo, band[0], equal_nan=True) and np.array_equal(hi, band[1], equal_nan=True)):
                 for bound in (lo, hi):  # this filter's own band (other degrees of freedom)
                     ax.plot(t, bound, color=line.get_color(), linestyle=":", linewidth=0.9, label=f"_band of {name}")
+        if clipped:
+            ax.axhline(CONSISTENCY_CAP, color="0.4", linewidth=0.8, linestyle=(0, (1, 1)))
+            ax.annotate(f"{', '.join(clipped)}: values above {CONSISTENCY_CAP:.0e} (or infinite) drawn at this line",
+                        (0.01, 0.97), xycoords="axes fraction", va="top", fontsize=7, color="0.25")
         ax.set_yscale("log")
         plain_log_ticks(ax)
         distinguish(ax)
