@@ -108,14 +108,14 @@ def test_consistency_figure_draws_the_chi_square_band(twins):
 
 def test_sweep_baselines_are_named_in_the_legend_not_overprinted():
     rows = [
-        {"filter": f, "variant": v, "l": l, "wall_time_s": w}
+        {"filter": f, "variant": v, "l": l, "wall_time_s": w, "ci95": 0.1}
         for v, scale in (("1 node (P1)", 1.0), ("4 corner nodes", 4.0))
         for f in ("UPF", "UPF-local")
         for l, w in ((0.0, scale), (0.5, 3 * scale), (1.0, 9 * scale))
     ]
     rows += [{"filter": "UKF", "variant": "1 node (P1)", "l": None, "wall_time_s": 0.9},
              {"filter": "UKF", "variant": "4 corner nodes", "l": None, "wall_time_s": 1.0}]
-    fig = metric_against_value(rows, "l", "wall_time_s", xlabel="UKF fraction l", ylabel="wall time (s)")
+    fig = metric_against_value(rows, "l", "wall_time_s", error_key="ci95", xlabel="UKF fraction l", ylabel="wall time (s)")
     assert figure_problems(fig) == []
     ax = fig.get_axes()[0]
     assert len(ax.texts) == 0  # no labels written into the plot, where two close baselines overprint
@@ -123,6 +123,8 @@ def test_sweep_baselines_are_named_in_the_legend_not_overprinted():
     assert "UKF, 1 node (P1) (baseline)" in labels and "UKF, 4 corner nodes (baseline)" in labels
     base = [ln for ln in _series(ax) if "baseline" in ln.get_label()]
     assert len({(str(ln.get_linestyle()), ln.get_color()) for ln in base}) == 2
+    swept = {ln.get_color() for ln in _series(ax) if "baseline" not in ln.get_label()}
+    assert not swept & {ln.get_color() for ln in base}  # baseline colours differ from every swept series'
     assert ax.get_xlabel() == "UKF fraction l"
 
 

@@ -132,7 +132,7 @@ def metric_against_value(
         plain_log_ticks(ax)
     distinguish(ax)
     span = (min(swept), max(swept)) if swept else (0.0, 1.0)
-    first = len(ax.lines)
+    first = sum(1 for ln in ax.lines if not ln.get_label().startswith("_"))  # colours after the swept series (not the error caps)
     dashes = ((0, (6, 3)), (0, (2, 2)), (0, (8, 3, 2, 3)), (0, (1, 3)))
     xs = np.linspace(span[0], span[1], 9)
     for i, (key, row) in enumerate(baselines):
