@@ -306,3 +306,18 @@ def test_what_cannot_fit_in_memory_is_one_line_and_exit_2(tmp_path, config, caps
     assert err.count("\n") == 1 and err.startswith("pursuit: error: ")
     assert re.search(msg, err), err
     assert not out.exists()  # refused before anything ran or was written
+
+
+def test_output_is_light_unless_full_data_is_asked_for(tmp_path):
+    import csv
+
+    p = tmp_path / "exp.toml"
+    p.write_text(GOOD.replace("runs = 3", "runs = 6"))
+    assert main(["run", str(p), "--no-progress", "--no-pdf", "--keep-runs", "2", "-o", str(tmp_path / "light")]) == 0
+    assert main(["run", str(p), "--no-progress", "--no-pdf", "--keep-runs", "2", "--full-data", "-o", str(tmp_path / "full")]) == 0
+    runs = {}
+    for kind in ("light", "full"):
+        with (tmp_path / kind / "errors.csv").open() as fh:
+            runs[kind] = sorted({int(r["run"]) for r in csv.DictReader(fh)})
+    assert runs == {"light": [0, 1], "full": [0, 1, 2, 3, 4, 5]}
+    assert (tmp_path / "light" / "per_step.csv").read_bytes() == (tmp_path / "full" / "per_step.csv").read_bytes()

@@ -1,4 +1,5 @@
-"""Result objects display briefly (text and notebook HTML) and convert to a pandas DataFrame."""
+"""Result objects: brief displays (text and notebook HTML), a pandas DataFrame, and the summary form
+that light output folders save."""
 
 from __future__ import annotations
 
@@ -8,8 +9,11 @@ import numpy as np
 import pytest
 
 import pursuit as pu
+from pursuit.engine import monte_carlo
 from pursuit.rng import run_streams
 from pursuit.scenarios import WSNRange
+
+from .engine.helpers import SMALL, assert_same_result, small_filters
 
 SCENARIO = WSNRange(steps=20)
 FILTERS = [pu.ExtendedKalmanFilter(SCENARIO.motion, SCENARIO.measurement, name="EKF<1>"),
@@ -79,3 +83,35 @@ def test_track_and_filter_result_reprs_show_shapes_not_values():
     assert len(text) < 300
     fr = pu.FilterResult("X", np.zeros((2, 3, 4)), None, {"nis": np.zeros((2, 3))}, 1.5)
     assert repr(fr) == "FilterResult('X', estimates=float64(2, 3, 4), covariances=None, info={nis}, wall_time=1.5)"
+
+
+# --------------------------------------------------------------------------
+# the summary form of light output folders
+# --------------------------------------------------------------------------
+RUNS, SEED = 7, 11
+
+
+@pytest.fixture(scope="module")
+def full():
+    return monte_carlo(SMALL, small_filters(), RUNS, SEED)
+
+
+def test_summarised_equals_what_summary_mode_computes(full):
+    direct = monte_carlo(SMALL, small_filters(), RUNS, SEED, store="summary", keep_runs=2, chunk_size=3)
+    light = full.summarised(2)
+    assert light.store == "summary" and light.runs == RUNS and full.store == "full"
+    assert light.summary() == full.summary()
+    no_wall = lambda rows: [{k: v for k, v in r.items() if k != "wall_time_s"} for r in rows]  # noqa: E731
+    assert no_wall(light.summary()) == no_wall(direct.summary())
+    for name in full.filter_names:
+        assert np.array_equal(light.rmse_per_step(name), full.rmse_per_step(name))
+        assert np.array_equal(light.anees(name), full.anees(name), equal_nan=True)
+        assert np.array_equal(light.consistency_bounds(name)[1], full.consistency_bounds(name)[1], equal_nan=True)
+    assert_same_result(direct.stored(), light.stored())
+
+
+def test_summarised_keeps_small_results_whole_and_refuses_bad_counts(full):
+    assert full.summarised(RUNS) is full
+    assert full.summarised(0).examples is None
+    with pytest.raises(ValueError, match="keep_runs"):
+        full.summarised(-1)

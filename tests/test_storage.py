@@ -212,3 +212,22 @@ def test_write_output_interrupted_between_the_renames_keeps_an_output(tmp_path, 
         pass
     assert [p.name for p in tmp_path.iterdir()] == ["demo"]
     assert pursuit.load(target).tables[0].rows in ([[1.0]], [[2.0]])
+
+
+def test_output_is_light_by_default_and_full_one_option_away(full, tmp_path):
+    light = write_output(_output(full), tmp_path / "light", keep_runs=3, formats=("png",))
+    heavy = write_output(_output(full), tmp_path / "heavy", keep_runs=3, formats=("png",), full_data=True)
+    runs_in = lambda folder: sorted({int(r["run"]) for r in _rows(folder / "errors.csv")})  # noqa: E731
+    assert runs_in(light) == [0, 1, 2] and runs_in(heavy) == list(range(RUNS))
+    # every run still counts in the per-step summaries: the same bytes either way
+    assert (light / "per_step.csv").read_bytes() == (heavy / "per_step.csv").read_bytes()
+    assert (light / "summary.csv").read_bytes() == (heavy / "summary.csv").read_bytes()
+    back = pursuit.load(light).result
+    assert back.store == "summary" and back.runs == RUNS and back.stored().runs == 3
+    assert back.summary() == full.summary()
+    assert_same_result(full.summarised(3).stored(), back.stored())
+    assert pursuit.load(heavy).result.store == "full"
+    size = lambda folder: sum(p.stat().st_size for p in folder.rglob("*") if p.suffix in (".csv", ".npz"))  # noqa: E731
+    assert size(light) < 0.6 * size(heavy)
+    assert "light" in pursuit.load(light).sidecar["data"] and pursuit.load(heavy).sidecar["data"] == "full"
+    assert "saved data" in (light / "report.html").read_text()

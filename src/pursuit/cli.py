@@ -128,6 +128,12 @@ def _parser(track: bool = True) -> argparse.ArgumentParser:
         sp.add_argument("--chunk-size", type=int, help="runs per chunk (memory bound)")
         sp.add_argument("--no-progress", action="store_true", help="never show a progress bar")
         sp.add_argument("--no-pdf", action="store_true", help="write figures as PNG only (default: PNG and PDF)")
+        sp.add_argument(
+            "--full-data",
+            action="store_true",
+            help="save every run's errors and arrays (errors.csv, results/*.npz); default: per-step summaries "
+            "of all runs and the first --keep-runs runs whole",
+        )
         sp.add_argument("--pdf", action="store_true", help=argparse.SUPPRESS)  # PDF is now the default
         _add_engine_arguments(sp)
 
@@ -162,7 +168,7 @@ def _add_engine_arguments(sp: argparse.ArgumentParser) -> None:
         help="keep every run's arrays (full) or reduce each chunk (summary: memory bounded by the chunk size); "
         "default auto: full unless that would take more than 1 GiB",
     )
-    g.add_argument("--keep-runs", type=int, metavar="R", help="runs kept whole in summary mode (default 10)")
+    g.add_argument("--keep-runs", type=int, metavar="R", help="runs kept whole in summary mode and in a folder written without --full-data (default 10)")
     c = sp.add_argument_group("how each filter step is computed")
     c.add_argument(
         "--compute-backend",
@@ -306,7 +312,7 @@ def _backend(args, source: str):
 
 def _execute(exp, out_dir: Path, args, backend) -> None:
     from .engine.backends import engine_options
-    from .engine.montecarlo import DEFAULT_CHUNK
+    from .engine.montecarlo import DEFAULT_CHUNK, DEFAULT_KEEP_RUNS
     from .report.output import format_table, write_output
 
     # the header first, so that it stands above the experiment's progress bars
@@ -323,7 +329,8 @@ def _execute(exp, out_dir: Path, args, backend) -> None:
         "store": args.store or "auto",
     }
     command = shlex.join(["pursuit", *args.argv])
-    write_output(output, out_dir, formats=formats, engine=engine, command=command)
+    keep = DEFAULT_KEEP_RUNS if args.keep_runs is None else args.keep_runs
+    write_output(output, out_dir, formats=formats, engine=engine, command=command, full_data=args.full_data, keep_runs=keep)
     print(f"\nwrote {out_dir} (report: {out_dir / 'report.html'})")
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -435,6 +435,51 @@ class MonteCarloResult:
         }
 
     # -- tables and files -----------------------------------------------------
+    def summarised(self, keep_runs: int = 10) -> "MonteCarloResult":
+        """This result in summary mode: the reduced statistics and runs ``0 .. keep_runs-1`` kept whole.
+
+        What ``store="summary"`` would have given for the same runs: the
+        summaries (RMSE per step, pooled and per run, ANEES, ANIS, their
+        bounds, step-info means) are the same bits, the other runs' arrays
+        are dropped.  A summary-mode result, or one with no more than
+        ``keep_runs`` runs, is returned as it is.  Used to write light output
+        folders (:func:`pursuit.report.output.write_output`).
+        """
+        if isinstance(keep_runs, bool) or not isinstance(keep_runs, (int, np.integer)) or keep_runs < 0:
+            raise ValueError(f"keep_runs: must be a non-negative integer, got {keep_runs!r}")
+        if self.truth is None or self.runs <= keep_runs:
+            return self
+        stats = {name: self.filter_statistics(name) for name in self.filter_names}
+        examples = None
+        if keep_runs:
+            r = int(keep_runs)
+            examples = replace(
+                self,
+                truth=self.truth[:, :r].copy(),
+                measurements=self.measurements[:, :r].copy(),
+                filters={
+                    name: FilterResult(
+                        name,
+                        fr.estimates[:, :r].copy(),
+                        None if fr.covariances is None else fr.covariances[:, :r].copy(),
+                        {k: np.asarray(v)[:, :r].copy() for k, v in fr.info.items()},
+                        fr.wall_time,
+                    )
+                    for name, fr in self.filters.items()
+                },
+                config=None,
+                statistics=None,
+            )
+        return replace(
+            self,
+            truth=None,
+            measurements=None,
+            filters={name: FilterResult(name, None, None, {}, fr.wall_time) for name, fr in self.filters.items()},
+            statistics=stats,
+            total_runs=self.runs,
+            examples=examples,
+        )
+
     def summary(self) -> list[dict[str, Any]]:
         """One row per filter: RMSEs, per-component RMS, consistency, wall time."""
         rows = []

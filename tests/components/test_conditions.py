@@ -32,7 +32,10 @@ def test_p2_experiment_produces_its_tables_and_figures(p2_output):
     assert rmse.columns == ["filter", "ideal_m", "actual_m", "abnormal_m"]
     assert [r[0] for r in rmse.rows] == ["EKF", "TFMKF", "EWFMKF", "STF", "IFMKF"]
     assert all(np.isfinite(v) and v > 0 for r in rmse.rows for v in r[1:])
-    assert sorted(p2_output.figures) == ["fading_factor", "rmse_position_abnormal", "rmse_position_actual", "rmse_position_ideal"]
+    assert sorted(p2_output.figures) == [
+        "consistency_abnormal", "consistency_actual", "consistency_ideal",
+        "fading_factor", "rmse_position_abnormal", "rmse_position_actual", "rmse_position_ideal",
+    ]
 
 
 def test_paper_table_puts_the_papers_numbers_beside_measured_ones(p2_output):

@@ -161,8 +161,8 @@ def test_sweep_figures_carry_the_scenarios_units(tmp_path):
     # one-run error plot's x axis is time in seconds (it plots result.times)
     out = load_experiment(_write(tmp_path, WSN_SMALL)).run(runs=3, seed=1)
     labels = _labels(out.figures)
-    assert labels["rmse_vs_N"] == [("N", "position RMSE (m)")]
-    assert labels["time_vs_N"] == [("N", "wall time (s)")]
+    assert labels["rmse_vs_N"] == [("particles N", "position RMSE (m)")]  # the quantity's name, not only its symbol
+    assert labels["time_vs_N"] == [("particles N", "filter wall time, all runs (s)")]
     assert labels["N40_rmse"] == [("time (s)", "position RMSE (m)")]
     assert labels["N40_estimates"] == [("x (m)", "y (m)")]
     assert set(labels["N40_particles"]) == {("particle index", "x (m)")}
@@ -173,4 +173,4 @@ def test_sweep_figures_of_a_dimensionless_state_show_no_made_up_unit(tmp_path):
     labels = _labels(out.figures)
     assert labels["N40_abs_error"] == [("time (s)", "|x error|")]  # UNGM's x is dimensionless
     assert labels["N40_rmse"] == [("time (s)", "state RMSE")]
-    assert labels["rmse_vs_N"] == [("N", "state RMSE")]
+    assert labels["rmse_vs_N"] == [("particles N", "state RMSE")]

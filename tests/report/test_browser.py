@@ -75,3 +75,34 @@ def test_index_page_links_every_report(chromium, artifacts, output):
         errors = browser.console_errors()
     assert errors == []
     assert links == [(output / "report.html").as_uri()]
+
+
+def _wide_output(folder: Path) -> Path:
+    """An output folder whose summary table is as wide as p3-upf's (16 columns of four-decimal numbers)."""
+    from pursuit.experiment import ExperimentOutput, Table
+    from pursuit.report.output import write_output
+
+    cols = ["variant", "l", "filter", "rmse", "ci95", "rms_x", "rms_vx", "rms_y", "rms_vy", "rmse_position",
+            "rmse_velocity", "nis_mean", "ess_mean", "resample_rate", "wall_time_s", "runs"]
+    rows = [["4 corner nodes", 0.25, "UPF-local", 50.86116476155978, 7.463904868788435, 45.55308448769722, 0.8836507929462359,
+             22.62243520400156, 0.5517066736015148, 50.86116476155978, 1.04173844009471, 0.995416478342234, 121.25971906888066,
+             0.3147, 111.1715915089999953, 100]] * 4
+    out = ExperimentOutput("wide", "Wide tables", "", [Table("summary", "Summary", cols, rows)], {}, {}, sidecar={"seed": 1, "runs": 100})
+    return write_output(out, folder / "wide")
+
+
+def test_wide_tables_fit_a_1400_px_window(chromium, artifacts, tmp_path):
+    """p1-wsn's and p3-upf's tables scrolled sideways at 1400 px: the page must fit without a horizontal scroll."""
+    folder = _wide_output(tmp_path)
+    with Browser(chromium) as browser:
+        browser.call("Emulation.setDeviceMetricsOverride", width=1400, height=1000, deviceScaleFactor=1, mobile=False)
+        browser.open((folder / "report.html").as_uri())
+        widths = browser.evaluate(
+            "({page: document.documentElement.scrollWidth, view: document.documentElement.clientWidth,"
+            " tables: Array.from(document.querySelectorAll('table')).map(t => [t.parentElement.scrollWidth, t.parentElement.clientWidth])})"
+        )
+        browser.screenshot(artifacts / "report-wide-table-1400.png")
+    assert widths["view"] == 1400
+    assert widths["page"] <= widths["view"], widths
+    for scroll, client in widths["tables"]:
+        assert scroll <= client, widths

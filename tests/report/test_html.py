@@ -34,7 +34,7 @@ def test_report_is_self_contained(result, tmp_path):
     folder = _folder(result, tmp_path)
     page = (folder / "report.html").read_text()
     pngs = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', page)
-    assert len(pngs) == 3
+    assert len(pngs) == 4  # position and velocity RMSE, consistency, trajectory
     for data in pngs:
         assert base64.b64decode(data).startswith(b"\x89PNG")
     assert "<script" not in page and "http://" not in page and "https://" not in page
@@ -75,7 +75,8 @@ def test_standard_figures_are_publication_ready(result):
         assert figure_problems(fig) == [], name
         for ax in fig.get_axes():
             assert re.search(r"\(.+\)", ax.get_ylabel()), (name, ax.get_ylabel())  # a unit
-            assert re.search(r"\(.+\)", ax.get_xlabel()), (name, ax.get_xlabel())
+            if ax.get_xlabel() or not ax.get_shared_x_axes().get_siblings(ax)[1:]:  # stacked panels share the bottom label
+                assert re.search(r"\(.+\)", ax.get_xlabel()), (name, ax.get_xlabel())
 
 
 def _labels(figs):
@@ -86,6 +87,7 @@ def test_standard_figures_carry_the_scenarios_units(result):
     assert _labels(standard_figures(result, SMALL, {})) == {
         "rmse_position": [("time (s)", "position RMSE (m)")],
         "rmse_velocity": [("time (s)", "velocity RMSE (m/s)")],
+        "consistency": [("", "ANEES (average over runs)"), ("time (s)", "ANIS (average over runs)")],
         "trajectory": [("x (m)", "y (m)")],
     }
 
@@ -105,6 +107,7 @@ def test_figure_units_come_from_the_scenario_never_guessed():
     assert _labels(standard_figures(feet, SMALL, {})) == {
         "rmse_position": [("time (s)", "position RMSE (ft)")],
         "rmse_velocity": [("time (s)", "velocity RMSE (ft/s)")],
+        "consistency": [("", "ANEES (average over runs)"), ("time (s)", "ANIS (average over runs)")],
         "trajectory": [("x (ft)", "y (ft)")],
     }
     # a scenario that declares no units gets none, not metres

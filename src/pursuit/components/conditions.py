@@ -35,7 +35,7 @@ from scipy import stats
 from ..engine.montecarlo import monte_carlo
 from ..experiment import ExperimentOutput, Table
 from ..registry import Param, register
-from ..report.figures import fading_over_time, rmse_over_time
+from ..report.figures import consistency_over_time, fading_over_time, rmse_over_time
 from ..results import MonteCarloResult
 from .experiments import build_filters, build_scenario, resolve_paper, resolve_section
 
@@ -247,6 +247,9 @@ class ConditionsPlan:
                 events=events[c.title],
                 title=f"Position RMSE over {r.runs} runs\n{c.title}",
             )
+            consistency = consistency_over_time(r, events=events[c.title], title=f"Consistency over {r.runs} runs\n{c.title}")
+            if consistency is not None:
+                figs[f"consistency_{c.name}"] = consistency
         if self.figure_opts["fading"]:
             # The median, not the mean: a few runs at λ_max dominate the mean of IFMKF's λ.
             figs["fading_factor"] = fading_over_time(

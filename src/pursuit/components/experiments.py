@@ -11,7 +11,7 @@ from ..engine.backends import current_options
 from ..engine.montecarlo import DEFAULT_KEEP_RUNS, monte_carlo, validate_filters
 from ..experiment import ExperimentOutput, Table
 from ..registry import Param, register
-from ..report.figures import rmse_over_time, trajectory
+from ..report.figures import consistency_over_time, rmse_over_time, trajectory
 from ..results import MonteCarloResult
 
 __all__ = [
@@ -183,7 +183,7 @@ def paper_table(result: MonteCarloResult, paper: list[dict[str, Any]], name: str
 
 
 def standard_figures(result: MonteCarloResult, scenario: Any, figure_opts: dict[str, Any]) -> dict[str, Any]:
-    """RMSE against time for position and velocity, and one run's trajectory."""
+    """RMSE against time for position and velocity, ANEES/ANIS with their χ² band, and one run's trajectory."""
     figs: dict[str, Any] = {}
     log = figure_opts.get("log_rmse", False)
     if result.position_indices:
@@ -192,6 +192,9 @@ def standard_figures(result: MonteCarloResult, scenario: Any, figure_opts: dict[
         figs["rmse_velocity"] = rmse_over_time(result, "velocity", log=log)
     if not result.position_indices and not result.velocity_indices:
         figs["rmse_state"] = rmse_over_time(result, "state", log=log)
+    consistency = consistency_over_time(result)
+    if consistency is not None:
+        figs["consistency"] = consistency
     run = run_index("figures.trajectory_run", figure_opts.get("trajectory_run", 0))
     check_run_exists("figures.trajectory_run", run, result.runs)
     # a summary-mode result keeps only its first runs whole; the title names the run drawn

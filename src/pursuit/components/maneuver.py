@@ -226,7 +226,9 @@ def _imm_singer(scenario, where="filter", name=None, models=None, transition=0.9
     filters = []
     for i, (a, s) in enumerate(rows):
         model = _reanchor(f"{where}.models[{i}]", lambda: mm.Singer(alpha=a, sigma=s, ndim=axes, dt=scenario.dt))
-        filters.append(KalmanFilter(model, scenario.measurement, name=f"Singer({a:g},{s:g})"))
+        # the mode's name in legends: the time constant reads better than α = 0.0166667 (1/s)
+        label = f"Singer τ = {1 / a:.3g} s, σ = {s:.3g} m/s²" if a > 0 else f"Singer α = 0, σ = {s:.3g} m/s²"
+        filters.append(KalmanFilter(model, scenario.measurement, name=label))
     return _reanchor(where, lambda: InteractingMultipleModel(filters, transition, initial_probs, name=name or "IMM-Singer", gate=gate))
 
 

@@ -32,6 +32,7 @@ from scipy import stats
 from ..engine.montecarlo import monte_carlo
 from ..experiment import ExperimentOutput, Table
 from ..registry import Param, register
+from ..report.figures import consistency_over_time
 from ..report.maneuver import Segment, detection_rates, mode_probabilities, rmse_panels
 from ..results import MonteCarloResult
 from .experiments import build_filters, build_scenario, resolve_section
@@ -324,6 +325,9 @@ class ManeuverPlan:
         rates = detection_rates(result, axes, segs, p)
         if rates is not None:
             figs["detections"] = rates
+        consistency = consistency_over_time(result)
+        if consistency is not None:
+            figs["consistency"] = consistency
         sidecar = {"strongest_maneuver": {"axis": axes[a_star], "time_s": t_star, "jump_m_s2": jump}}
         return ExperimentOutput(self.name, "", "", tables, figs, results={"result": result}, sidecar=sidecar)
 

@@ -41,7 +41,7 @@ from ..engine.montecarlo import FILTER_STREAM, SCENARIO_STREAM, monte_carlo
 from ..engine.snapshots import particle_snapshots
 from ..experiment import ExperimentOutput, Table
 from ..registry import Param, register
-from ..report.figures import labelled, rmse_over_time, trajectory
+from ..report.figures import consistency_over_time, labelled, rmse_over_time, trajectory
 from ..report.sweep_figures import (
     abs_error_over_time,
     metric_against_value,
@@ -103,6 +103,7 @@ FIGURE_PARAMS = (
     Param("components", "any", [], "state labels that get their own RMSE-over-time figure", check=_str_list),
     Param("snapshot_steps", "any", [], "steps whose particle clouds are drawn", check=_int_list),
     Param("snapshot_value", "float", None, "swept value whose particle clouds are drawn (default: the last)"),
+    Param("axis_label", "str", "", "name of the swept value on figure axes (default: 'PARAMETER LABEL', e.g. 'particles N')"),
 )
 
 PAPER_PARAMS = (
@@ -347,6 +348,8 @@ class SweepPlan:
         opts = self.figure_opts
         sw = self.sweep
         label = self.label
+        # the axis names the quantity, not only its symbol ("fraction l", not "l")
+        xname = opts["axis_label"] or (sw["parameter"] if label == sw["parameter"] else f"{sw['parameter']} {label}")
         if len(sw["values"]) > 1:
             # the unit of the headline component, from the scenario (the variants share the state)
             unit = next(iter(first_results.values()))[1].component_unit(sw["component"]) if first_results else None
@@ -359,11 +362,12 @@ class SweepPlan:
                     label,
                     "rmse",
                     error_key="ci95",
+                    xlabel=xname,
                     ylabel=labelled(f"{sw['component']} RMSE", unit),
                     title=f"RMSE against {label}" + ("" if variant is None else f", {variant}"),
                 )
             figs[f"time_vs_{label}"] = metric_against_value(
-                rows, label, "wall_time_s", ylabel="wall time (s)", title=f"Run time against {label}"
+                rows, label, "wall_time_s", xlabel=xname, ylabel="filter wall time, all runs (s)", title=f"Run time against {label}"
             )
         for value in opts["values"]:
             if value not in first_results:
@@ -378,6 +382,9 @@ class SweepPlan:
             figs[f"{tag}_rmse"] = rmse_over_time(
                 result, sw["component"], log=opts["log_rmse"], title=f"{sw['component']} RMSE over {result.runs} runs, {label} = {value:g}"
             )
+            consistency = consistency_over_time(result, title=f"Consistency over {result.runs} runs, {label} = {value:g}")
+            if consistency is not None:
+                figs[f"{tag}_consistency"] = consistency
             for comp in opts["components"]:
                 figs[f"{tag}_rmse_{comp}"] = rmse_over_time(
                     result, comp, log=opts["log_rmse"], title=f"{comp} RMSE over {result.runs} runs, {label} = {value:g}"

@@ -2,20 +2,138 @@
 
 from __future__ import annotations
 
+import re
 from typing import Sequence
 
 import numpy as np
+from matplotlib import ticker
 from matplotlib.figure import Figure
 
 from ..results import MonteCarloResult
 
-__all__ = ["rmse_over_time", "trajectory", "fading_over_time", "mark_events", "figure_problems", "labelled"]
+__all__ = [
+    "rmse_over_time",
+    "trajectory",
+    "fading_over_time",
+    "consistency_over_time",
+    "mark_events",
+    "figure_problems",
+    "labelled",
+    "distinguish",
+    "legend_beside",
+    "plain_log_ticks",
+    "coincident",
+]
+
+# Each series gets its own line style and marker, so that curves lying on top of
+# each other stay visible (and readable in greyscale print).
+LINE_STYLES = ("-", "--", "-.", ":")
+MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
+# Two curves closer than this share of the axis span at most steps look like one.
+COINCIDE = 0.01
+COINCIDE_SHARE = 0.9
+MARKS_PER_LINE = 10
+# ANEES/ANIS above this are drawn at it (and the panel says so): a diverged filter reaches 1e300 or inf
+CONSISTENCY_CAP = 1e12
 
 
-def _new(width: float = 6.4, height: float = 4.0) -> tuple[Figure, object]:
+def _new(width: float = 7.6, height: float = 4.0) -> tuple[Figure, object]:
     fig = Figure(figsize=(width, height), layout="constrained")
     ax = fig.add_subplot()
     return fig, ax
+
+
+def _series(ax) -> list:
+    """The labelled data lines of an axes (not reference lines such as axhline/axvline)."""
+    return [ln for ln in ax.lines if not ln.get_label().startswith("_") and ln.get_transform() == ax.transData]
+
+
+def _scaled(ax, y: np.ndarray) -> np.ndarray:
+    y = np.asarray(y, dtype=float)
+    if ax.get_yscale() == "log":
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(y > 0, np.log10(np.where(y > 0, y, 1.0)), np.nan)
+    return y
+
+
+def coincident(ax, a, b, tol: float = COINCIDE) -> str | None:
+    """``"="`` if two lines have the same points, ``"≈"`` if they lie within ``tol`` of the y span, else None.
+
+    The span is that of every series of the axes, on the axis's scale (decades
+    on a log axis), so "close" means "drawn on top of each other"; ``"≈"``
+    needs that at ``COINCIDE_SHARE`` of the points (two filters that differ
+    only in the first steps still hide each other for the rest).
+    """
+    xa, ya = (np.asarray(v, dtype=float) for v in a.get_data())
+    xb, yb = (np.asarray(v, dtype=float) for v in b.get_data())
+    if xa.shape != xb.shape or not np.array_equal(xa, xb, equal_nan=True):
+        return None
+    if np.array_equal(ya, yb, equal_nan=True):
+        return "="
+    sa, sb = _scaled(ax, ya), _scaled(ax, yb)
+    every = np.concatenate([_scaled(ax, ln.get_ydata()) for ln in _series(ax)] or [sa])
+    span = float(np.nanmax(every) - np.nanmin(every)) if np.isfinite(every).any() else 0.0
+    both = np.isfinite(sa) & np.isfinite(sb)
+    if not both.any() or np.any(np.isfinite(sa) != np.isfinite(sb)):
+        return None
+    close = np.abs(sa[both] - sb[both]) <= tol * span
+    return "≈" if float(np.mean(close)) >= COINCIDE_SHARE else None
+
+
+def distinguish(ax, *, note: bool = True, skip: Sequence[str] = ("truth",)) -> None:
+    """Draw the series of an axes distinguishably: own line style, staggered markers, coincidences named.
+
+    Each labelled line gets the next line style and marker; the markers of
+    line ``i`` of ``n`` start ``i/n`` of the way into the marker spacing, so
+    two curves on top of each other show both marker shapes.  With ``note``,
+    a line that coincides with an earlier one (:func:`coincident`) says so in
+    its legend label: ``"EWFMKF (= STF)"`` (same values) or ``"UKF (≈ CKF)"``.
+    Lines labelled in ``skip`` (the truth) keep their own style.  Call it
+    after the y scale is set and before the legend is drawn.
+    """
+    lines = [ln for ln in _series(ax) if ln.get_label() not in skip]
+    n = max(len(lines), 1)
+    for i, ln in enumerate(lines):
+        k = len(ln.get_xdata())
+        every = max(1, k // MARKS_PER_LINE)
+        ln.set_linestyle(LINE_STYLES[i % len(LINE_STYLES)])
+        ln.set_marker(MARKERS[i % len(MARKERS)])
+        ln.set_markersize(4.5)
+        ln.set_markerfacecolor("none")
+        ln.set_markevery((i * every // n, every) if k > MARKS_PER_LINE else None)
+    if not note:
+        return
+    for j, ln in enumerate(lines):
+        for first in lines[:j]:
+            how = coincident(ax, first, ln)
+            if how:
+                ln.set_label(f"{ln.get_label()} ({how} {first.get_label().split(' (')[0]})")
+                break
+
+
+def legend_beside(ax, **kw) -> None:
+    """The axes' legend to the right of the plot, where it cannot hide data (constrained layout makes room)."""
+    kw.setdefault("fontsize", 8)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, **kw)
+
+
+class _PlainLogFormatter(ticker.LogFormatter):
+    """Matplotlib's choice of which log ticks to label, written as plain numbers with up to four digits."""
+
+    def __call__(self, x: float, pos: int | None = None) -> str:
+        # an axis stretched to the float limit by a diverged filter puts a tick at inf: no label, no crash
+        return super().__call__(x, pos) if np.isfinite(x) and x > 0 else ""
+
+    def _num_to_string(self, x: float, vmin: float, vmax: float) -> str:
+        text = f"{x:.4g}"
+        return f"{x:.0f}" if "e" in text and 1.0 <= abs(x) < 1e7 else text  # 10000, not 1e+04
+
+
+def plain_log_ticks(ax, axis: str = "y") -> None:
+    """Label a log axis with plain numbers (2, 3, 0.0025, 100) instead of ``2×10⁰`` or ``3e-03``."""
+    a = ax.yaxis if axis == "y" else ax.xaxis
+    a.set_major_formatter(_PlainLogFormatter())
+    a.set_minor_formatter(_PlainLogFormatter(labelOnlyBase=False, minor_thresholds=(1.2, 0.5)))
 
 
 def rmse_over_time(
@@ -57,13 +175,15 @@ def rmse_over_time(
         ax.plot(result.times, result.rmse_per_step(name, component), label=name, linewidth=1.4)
     if log:
         ax.set_yscale("log")
+        plain_log_ticks(ax)
+    distinguish(ax)
     u = result.component_unit(component) if unit is None else unit
     ax.set_xlabel("time (s)")
     ax.set_ylabel(labelled(f"{label} RMSE", u))
     ax.set_title(title or f"{label.capitalize()} RMSE over {result.runs} runs")
     mark_events(ax, events)
     ax.grid(True, alpha=0.3)
-    ax.legend()
+    legend_beside(ax)
     return fig
 
 
@@ -94,7 +214,7 @@ def trajectory(
         kept = "" if stored is result else f" (only runs 0..{stored.runs - 1} of {result.runs} were kept whole)"
         raise ValueError(f"run: must lie in [0, {stored.runs - 1}], got {run}{kept}")
     result = stored
-    fig, ax = _new(6.4, 4.8)
+    fig, ax = _new(7.6, 4.8)
     names = list(filters) if filters is not None else result.filter_names
     pos = list(result.position_indices) or [0]
     truth = result.truth[:, run, :]
@@ -119,7 +239,8 @@ def trajectory(
         ax.set_ylabel(labelled(result.state_labels[i], result.unit(i)))
     ax.set_title(title or f"Truth and estimates, run {run}")
     ax.grid(True, alpha=0.3)
-    ax.legend()
+    distinguish(ax)
+    legend_beside(ax)
     return fig
 
 
@@ -183,20 +304,90 @@ def fading_over_time(
                 row[1].plot(result.times, faded, label=name, linewidth=1.3, color=line.get_color())
         if log:
             ax.set_yscale("log")
+            plain_log_ticks(ax)
+        distinguish(ax, note=False)  # one legend serves both columns, whose overlaps differ: styles, not notes
         ax.set_ylabel(f"{statistic} λ")
         ax.set_title(panel, fontsize=10)
         for a in row:
             mark_events(a, (events or {}).get(panel, ()))
             a.grid(True, alpha=0.3)
         if share:
+            distinguish(row[1], note=False)
             row[1].set_ylabel("runs faded (%)")
             row[1].set_ylim(-3.0, 103.0)
             row[1].set_title("share of runs with λ > 1", fontsize=10)
+    legend_beside(grid[0, -1])
     for a in grid[-1]:
         a.set_xlabel("time (s)")
-    axes[0].legend(fontsize=8, ncol=3)
     if title:
         fig.suptitle(title)
+    return fig
+
+
+def consistency_over_time(
+    result: MonteCarloResult,
+    *,
+    filters: Sequence[str] | None = None,
+    level: float = 0.95,
+    title: str | None = None,
+    events: Sequence[tuple[float, str]] = (),
+) -> Figure | None:
+    """ANEES and ANIS against time with the per-step χ² band of a consistent filter.
+
+    One panel per statistic the filters report (NEES needs covariances, NIS
+    innovations); the shaded band is the two-sided ``level`` χ² interval of
+    one step's average over the runs (:meth:`MonteCarloResult.consistency_bounds`),
+    drawn once where the filters share it and as dotted lines in the filter's
+    colour where a filter's differs.  The y axis is logarithmic: an
+    inconsistent filter is off by orders of magnitude.  None when no filter
+    reports either statistic.
+    """
+    names = list(filters) if filters is not None else result.filter_names
+    panels = []
+    for what in ("nees", "nis"):
+        have = []
+        for name in names:
+            try:
+                have.append((name, getattr(result, f"a{what}")(name)))
+            except ValueError:
+                continue
+        if have:
+            panels.append((what, have))
+    if not panels:
+        return None
+    fig = Figure(figsize=(7.6, 2.9 * len(panels) + 0.7), layout="constrained")
+    axs = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    t = result.times
+    for ax, (what, have) in zip(axs, panels):
+        band = result.consistency_bounds(have[0][0], what, level)
+        ax.fill_between(t, *band, color="0.5", alpha=0.22, linewidth=0, label=f"χ² {100 * level:g} % band")
+        clipped = []
+        for name, values in have:
+            values = np.asarray(values, dtype=float)
+            # a diverged filter's ANEES reaches 1e300 or inf and would stretch the axis past the float range
+            over = ~np.isfinite(values) | (values > CONSISTENCY_CAP)
+            if np.any(over & ~np.isnan(values)):
+                clipped.append(name)
+                values = np.where(over & ~np.isnan(values), CONSISTENCY_CAP, values)
+            (line,) = ax.plot(t, values, label=name, linewidth=1.3)
+            lo, hi = result.consistency_bounds(name, what, level)
+            if not (np.array_equal(lo, band[0], equal_nan=True) and np.array_equal(hi, band[1], equal_nan=True)):
+                for bound in (lo, hi):  # this filter's own band (other degrees of freedom)
+                    ax.plot(t, bound, color=line.get_color(), linestyle=":", linewidth=0.9, label=f"_band of {name}")
+        if clipped:
+            ax.axhline(CONSISTENCY_CAP, color="0.4", linewidth=0.8, linestyle=(0, (1, 1)))
+        ax.set_yscale("log")
+        plain_log_ticks(ax)
+        distinguish(ax)
+        mark_events(ax, events)
+        ax.set_ylabel(f"A{what.upper()} (average over runs)")
+        note = f"\n{', '.join(clipped)}: values above {CONSISTENCY_CAP:.0e} (or infinite) drawn at the dotted line" if clipped else ""
+        ax.set_title(f"{what.upper()}: {'state' if what == 'nees' else 'innovation'} error normalised by the filter's covariance"
+                     + note, fontsize=9)
+        ax.grid(True, alpha=0.3)
+        legend_beside(ax)
+    axs[-1].set_xlabel("time (s)")
+    fig.suptitle(title or f"Consistency over {result.runs} runs (inside the band: as confident as accurate)")
     return fig
 
 
@@ -206,14 +397,19 @@ def labelled(name: str, unit: str | None) -> str:
 
 
 def figure_problems(fig: Figure) -> list[str]:
-    """What keeps a figure from being publication-ready: unlabelled axes, a missing legend.
+    """What keeps a figure from being publication-ready.
 
     Every axes that shows data needs a y label and an x label (an axes whose
     x axis is shared with a labelled one, as in stacked panels, or a figure
-    with a common x label, is fine); the series of an axes that shows more
-    than one labelled series must appear in a legend (its own, another
-    panel's or the figure's).  Returns an empty list for a good figure.
+    with a common x label, is fine), and an x label names a quantity (not a
+    bare symbol such as ``l`` without a unit); the series of an axes that
+    shows more than one labelled series must appear in a legend (its own,
+    another panel's or the figure's); no legend may cover a data point; two
+    series that coincide (:func:`coincident`) must differ in line style or
+    marker; tick labels are plain numbers, not ``2×10⁰``.  Returns an empty
+    list for a good figure.
     """
+    fig.draw_without_rendering()  # legend positions and tick labels exist only after a layout
     problems = []
     axes = fig.get_axes()
     legends = [leg for ax in axes if (leg := ax.get_legend()) is not None] + list(fig.legends)
@@ -228,7 +424,29 @@ def figure_problems(fig: Figure) -> list[str]:
             problems.append(f"{where}: no x label")
         if not ax.get_ylabel().strip():
             problems.append(f"{where}: no y label")
+        xlabel = ax.get_xlabel().strip()
+        if xlabel and "(" not in xlabel and len(re.sub(r"\W", "", xlabel)) < 2:
+            problems.append(f"{where}: x label {xlabel!r} names no quantity")
         labels = {a.get_label() for a in (*ax.lines, *ax.collections) if not a.get_label().startswith("_")}
         if len(labels) > 1 and not labels <= in_legend:
             problems.append(f"{where}: series {sorted(labels - in_legend)} are in no legend")
+        ticks = [t.get_text() for t in (*ax.get_xticklabels(which="both"), *ax.get_yticklabels(which="both")) if t.get_visible()]
+        if any("times" in t for t in ticks):
+            problems.append(f"{where}: tick labels in scientific notation ({[t for t in ticks if 'times' in t][0]})")
+        series = _series(ax)
+        for j, b in enumerate(series):
+            for a in series[:j]:
+                alike = (a.get_linestyle(), a.get_marker()) == (b.get_linestyle(), b.get_marker())
+                if alike and coincident(ax, a, b):
+                    problems.append(f"{where}: series {a.get_label()!r} and {b.get_label()!r} coincide and are drawn alike")
+        for leg in legends:
+            box = leg.get_window_extent()
+            inside = ax.get_window_extent()
+            for ln in series + [ln for ln in ax.lines if ln.get_transform() == ax.transData and ln not in series]:
+                xy = ln.get_transform().transform(np.column_stack([np.asarray(v, dtype=float) for v in ln.get_data()]))
+                xy = xy[np.isfinite(xy).all(axis=1)]
+                visible = (xy[:, 0] >= inside.x0) & (xy[:, 0] <= inside.x1) & (xy[:, 1] >= inside.y0) & (xy[:, 1] <= inside.y1)
+                covered = visible & (xy[:, 0] > box.x0) & (xy[:, 0] < box.x1) & (xy[:, 1] > box.y0) & (xy[:, 1] < box.y1)
+                if covered.any():
+                    problems.append(f"{where}: the legend covers {int(covered.sum())} point(s) of {ln.get_label()!r}")
     return problems

@@ -29,7 +29,8 @@ _CSS = """
 :root { --fg: #1b1f24; --muted: #57606a; --line: #d0d7de; --head: #f6f8fa; --paper: #fff8c5; --accent: #0a5cad; }
 * { box-sizing: border-box; }
 body { font: 15px/1.5 system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; color: var(--fg);
-       max-width: 1100px; margin: 0 auto; padding: 24px; }
+       max-width: 1400px; margin: 0 auto; padding: 24px; }
+.desc, .note, nav, section > p, section > ul { max-width: 1000px; }
 h1 { font-size: 1.6em; margin: 0 0 4px; } h2 { border-bottom: 1px solid var(--line); padding-bottom: 4px; margin-top: 2em; }
 h3 { font-size: 1.05em; margin: 1.4em 0 0.4em; }
 .desc { color: var(--muted); white-space: pre-line; }
@@ -37,10 +38,11 @@ dl.meta { display: grid; grid-template-columns: max-content 1fr; gap: 2px 16px; 
 dl.meta dt { color: var(--muted); } dl.meta dd { margin: 0; font-family: ui-monospace, monospace; }
 nav a { margin-right: 14px; color: var(--accent); }
 .scroll { overflow-x: auto; }
-table { border-collapse: collapse; font-size: 0.9em; margin: 4px 0; }
-th, td { border: 1px solid var(--line); padding: 3px 8px; }
-th { background: var(--head); text-align: left; }
-td.num { text-align: right; font-family: ui-monospace, monospace; }
+table { border-collapse: collapse; font-size: 0.85em; margin: 4px 0; }
+th, td { border: 1px solid var(--line); padding: 3px 6px; }
+th { background: var(--head); text-align: left; vertical-align: bottom; }
+td.num { text-align: right; font-family: ui-monospace, monospace; font-size: 0.95em; }
+figure img { max-width: min(100%, 1100px); }
 table.paper th.paper, table.paper td.paper { background: var(--paper); }
 .note { color: var(--muted); font-size: 0.9em; white-space: pre-line; }
 figure { margin: 16px 0; } figure img { max-width: 100%; height: auto; border: 1px solid var(--line); }
@@ -61,7 +63,8 @@ def _is_num(v: Any) -> bool:
 def _table(t: dict[str, Any], name: str) -> str:
     paper = t.get("kind") == "paper"
     cols = t.get("columns", [])
-    head = "".join(f'<th class="{"paper" if paper and c == "paper" else ""}">{_e(c)}</th>' for c in cols)
+    # a break opportunity after each underscore: long column names (rmse_position) wrap instead of widening the table
+    head = "".join(f'<th class="{"paper" if paper and c == "paper" else ""}">{_e(c).replace("_", "_<wbr>")}</th>' for c in cols)
     body = []
     for row in t.get("rows", []):
         cells = []
@@ -138,6 +141,7 @@ def render_report(folder: str | Path) -> tuple[str, list[str]]:
         ("chunk size", engine.get("chunk_size")),
         ("backend", _backend_text(engine.get("backend"))),
         ("storage", engine.get("store")),
+        ("saved data", sidecar.get("data")),
         ("config file", sidecar.get("config_file")),
         ("reference", sidecar.get("reference")),
         ("written", sidecar.get("written")),

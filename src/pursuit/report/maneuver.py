@@ -9,6 +9,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ..results import MonteCarloResult
+from .figures import distinguish, legend_beside, plain_log_ticks
 
 __all__ = ["Segment", "rmse_panels", "mode_probabilities", "detection_rates"]
 
@@ -82,8 +83,10 @@ def rmse_panels(
         _shade(ax, segments, axis, label=row == 0, window=window)
         if log:
             ax.set_yscale("log")
+            plain_log_ticks(ax)
         elif window is not None and top > 0:
             ax.set_ylim(0.0, 1.08 * top)
+        distinguish(ax, note=False)  # one legend for three panels: styles, not notes, keep overlaps visible
         ax.set_ylabel(f"{axis} {comp} RMSE ({unit})")
         ax.grid(True, alpha=0.3)
     if window is not None:
@@ -100,7 +103,7 @@ def mode_probabilities(result: MonteCarloResult, segments: Sequence[Segment] = (
     imms = [n for n in result.filter_names if "mode_probs" in result.filters[n].info]
     if not imms:
         return None
-    fig = Figure(figsize=(7.0, 2.6 * len(imms) + 0.6), layout="constrained")
+    fig = Figure(figsize=(9.0, 2.6 * len(imms) + 0.6), layout="constrained")
     axs = np.atleast_1d(fig.subplots(len(imms), 1, sharex=True))
     for ax, name in zip(axs, imms):
         mu = result.filters[name].info["mode_probs"].mean(axis=1)  # (K, r)
@@ -109,10 +112,11 @@ def mode_probabilities(result: MonteCarloResult, segments: Sequence[Segment] = (
             ax.plot(result.times, mu[:, j], label=names[j], linewidth=1.3)
         _shade(ax, segments, None, label=False)
         ax.set_ylim(0.0, 1.0)
-        ax.set_ylabel("mean μ")
+        ax.set_ylabel("mean mode probability μ")
         ax.set_title(name, fontsize=9)
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7, loc="upper left")
+        distinguish(ax)
+        legend_beside(ax, title="mode (model)", title_fontsize=8)
     axs[-1].set_xlabel("time (s)")
     fig.suptitle("IMM mode probabilities, mean over runs (shaded: any axis maneuvering)")
     return fig
@@ -123,7 +127,7 @@ def detection_rates(result: MonteCarloResult, axes: str, segments: Sequence[Segm
     names = [n for n in result.filter_names if "maneuver" in result.filters[n].info]
     if not names:
         return None
-    fig = Figure(figsize=(7.0, 6.0), layout="constrained")
+    fig = Figure(figsize=(8.0, 6.0), layout="constrained")
     axs = fig.subplots(len(axes), 1, sharex=True, squeeze=False)[:, 0]
     for a, (ax, axis) in enumerate(zip(axs, axes)):
         for name in names:
@@ -134,9 +138,10 @@ def detection_rates(result: MonteCarloResult, axes: str, segments: Sequence[Segm
                 ax.axhline(p, color="grey", linestyle="--", linewidth=0.8)
         _shade(ax, segments, axis, label=a == 0)
         ax.set_ylim(0.0, 1.0)
-        ax.set_ylabel(f"{axis}: detections")
+        ax.set_ylabel(f"{axis}: share detecting")
         ax.grid(True, alpha=0.3)
-    axs[0].legend(fontsize=8, loc="center left")
+        distinguish(ax, note=False)
+    legend_beside(axs[0])
     axs[-1].set_xlabel("time (s)")
     fig.suptitle("Share of runs with D > M (dashed: configured false-alarm rate)")
     return fig

@@ -15,7 +15,9 @@ from typing import Any
 import numpy as np
 
 from .._json import json_default
+from ..engine.montecarlo import DEFAULT_KEEP_RUNS
 from ..experiment import ExperimentOutput, Table
+from ..results import MonteCarloResult
 
 __all__ = ["write_output", "format_table", "versions", "cell", "FILES"]
 
@@ -102,6 +104,8 @@ def write_output(
     formats: tuple[str, ...] = ("png", "pdf"),
     engine: dict[str, Any] | None = None,
     command: str | None = None,
+    full_data: bool = False,
+    keep_runs: int = DEFAULT_KEEP_RUNS,
 ) -> Path:
     """Write an experiment's output folder: tables, results, figures, sidecar and report.
 
@@ -127,6 +131,15 @@ def write_output(
         How the runs were computed (backend, chunk size, storage), for the sidecar.
     command
         The command line that produced it, for the sidecar.
+    full_data
+        Save every run: ``errors.csv`` with every (run, step) and each result
+        object whole.  By default the folder is light: each Monte Carlo
+        result is saved in summary mode (:meth:`MonteCarloResult.summarised`:
+        the reduced statistics, from which every table, ``per_step.csv`` and
+        the summaries are the same bits) with runs ``0 .. keep_runs-1`` kept
+        whole, and ``errors.csv`` lists those runs only.
+    keep_runs
+        Runs kept whole in a light folder.
     """
     from ..output_folder import make_temp, recover, replace
     from ..storage import (
@@ -147,13 +160,18 @@ def write_output(
         for table in output.tables:
             _write_csv(tmp / f"{table.name}.csv", table)
             files[f"{table.name}.csv"] = table.title or table.name
-        mc = monte_carlo_results(output.results)
+        # light by default: the per-step summaries of every run, the arrays of the first few
+        saved = output.results if full_data else {
+            k: v.summarised(keep_runs) if isinstance(v, MonteCarloResult) else v for k, v in output.results.items()
+        }
+        mc = monte_carlo_results(saved)
         if mc:
             write_errors_csv(tmp / "errors.csv", output.name, mc)
-            write_per_step_csv(tmp / "per_step.csv", output.name, mc)
-            files["errors.csv"] = FILES["errors.csv"]
+            write_per_step_csv(tmp / "per_step.csv", output.name, monte_carlo_results(output.results))
+            files["errors.csv"] = FILES["errors.csv"] if full_data or all(r.store == "full" for r in mc.values()) else (
+                FILES["errors.csv"] + f" (only runs kept whole: the first {keep_runs}; --full-data lists every run)")
             files["per_step.csv"] = FILES["per_step.csv"]
-        manifest = save_results(output.results, tmp / "results")
+        manifest = save_results(saved, tmp / "results")
         if output.figures:
             (tmp / "figures").mkdir()
             for name, fig in output.figures.items():
@@ -169,6 +187,9 @@ def write_output(
             sidecar["engine"] = engine
         if command:
             sidecar["command"] = command
+        if mc:
+            light = not full_data and any(r.store == "summary" for r in mc.values())
+            sidecar["data"] = f"light: per-step summaries of every run, runs 0..{keep_runs - 1} kept whole" if light else "full"
         sidecar["written"] = datetime.now(timezone.utc)
         sidecar["versions"] = versions()
         sidecar["tables"] = {

@@ -8,7 +8,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ..results import MonteCarloResult
-from .figures import labelled
+from .figures import MARKERS, distinguish, labelled, legend_beside, plain_log_ticks
 
 __all__ = ["abs_error_over_time", "particle_clouds", "metric_against_value"]
 
@@ -19,7 +19,7 @@ def abs_error_over_time(
     """|x̂ − x| of one state component against time, one run, each filter."""
     if not 0 <= run < result.runs:
         raise ValueError(f"run: must lie in [0, {result.runs - 1}], got {run}")
-    fig = Figure(figsize=(6.4, 4.0), layout="constrained")
+    fig = Figure(figsize=(7.6, 4.0), layout="constrained")
     ax = fig.add_subplot()
     for name in filters if filters is not None else result.filter_names:
         err = np.abs(result.filters[name].estimates[:, run, component] - result.truth[:, run, component])
@@ -29,7 +29,8 @@ def abs_error_over_time(
     ax.set_ylabel(labelled(f"|{label} error|", result.unit(component)))
     ax.set_title(title or f"Absolute error of {label}, run {run}")
     ax.grid(True, alpha=0.3)
-    ax.legend()
+    distinguish(ax)
+    legend_beside(ax)
     return fig
 
 
@@ -82,46 +83,67 @@ def particle_clouds(
     return fig
 
 
+def _series_name(row: Mapping[str, object], variants: set) -> str:
+    """``"UPF"``, or ``"UPF, 4 corner nodes"`` when the rows have scenario variants."""
+    return str(row["filter"]) if len(variants) <= 1 or not row.get("variant") else f"{row['filter']}, {row['variant']}"
+
+
 def metric_against_value(
     rows: Sequence[Mapping[str, object]],
     value_key: str,
     metric: str,
     *,
     error_key: str | None = None,
+    xlabel: str | None = None,
     ylabel: str | None = None,
     log: bool = False,
     title: str | None = None,
 ) -> Figure:
-    """A metric against the swept value, one line per filter (and variant)."""
-    fig = Figure(figsize=(6.4, 4.0), layout="constrained")
+    """A metric against the swept value, one line per filter (and variant).
+
+    Rows without a swept value (baselines such as a UKF that has no
+    particles) are drawn as horizontal lines across the plot, each in its own
+    colour and dash pattern and named in the legend with ``(baseline)``.
+    ``xlabel`` names the swept quantity (default ``value_key``).
+    """
+    fig = Figure(figsize=(7.6, 4.0), layout="constrained")
     ax = fig.add_subplot()
     groups: dict[str, list[Mapping[str, object]]] = {}
     variants = {row.get("variant") for row in rows}
     for row in rows:
-        key = str(row["filter"]) if len(variants) <= 1 or not row.get("variant") else f"{row['filter']} ({row['variant']})"
-        groups.setdefault(key, []).append(row)
+        groups.setdefault(_series_name(row, variants), []).append(row)
+    swept = [float(r[value_key]) for r in rows if r.get(value_key) is not None]
+    baselines = []
     for key, rs in groups.items():
+        base = [r for r in rs if r.get(value_key) is None]
+        baselines.extend((key, r) for r in base)
         rs = [r for r in rs if r.get(value_key) is not None]
         if not rs:
             continue
         x = np.array([float(r[value_key]) for r in rs])
         y = np.array([float(r[metric]) for r in rs])
         order = np.argsort(x)
+        (line,) = ax.plot(x[order], y[order], label=key)
         if error_key is not None:
             err = np.array([float(r[error_key]) for r in rs])
-            ax.errorbar(x[order], y[order], yerr=err[order], marker="o", capsize=3, label=key)
-        else:
-            ax.plot(x[order], y[order], marker="o", label=key)
-    for row in rows:  # baselines that do not depend on the swept value
-        if row.get(value_key) is None:
-            key = str(row["filter"]) if len(variants) <= 1 or not row.get("variant") else f"{row['filter']} ({row['variant']})"
-            ax.axhline(float(row[metric]), linestyle="--", linewidth=1.0, color="gray")
-            ax.annotate(key, (ax.get_xlim()[0], float(row[metric])), fontsize=8, va="bottom")
+            ax.errorbar(x[order], y[order], yerr=err[order], fmt="none", capsize=3, ecolor=line.get_color(), elinewidth=1.0)
     if log:
         ax.set_yscale("log")
-    ax.set_xlabel(value_key)
+        plain_log_ticks(ax)
+    distinguish(ax)
+    span = (min(swept), max(swept)) if swept else (0.0, 1.0)
+    first = sum(1 for ln in ax.lines if not ln.get_label().startswith("_"))  # colours after the swept series (not the error caps)
+    dashes = ((0, (6, 3)), (0, (2, 2)), (0, (8, 3, 2, 3)), (0, (1, 3)))
+    xs = np.linspace(span[0], span[1], 9)
+    for i, (key, row) in enumerate(baselines):
+        # a real line over the swept range (not axhline), so the legend and the checks see it as data; own dashes
+        # and markers (staggered) so that two baselines at nearly the same value both stay visible
+        ax.plot(xs, np.full(xs.shape, float(row[metric])), linestyle=dashes[i % len(dashes)], linewidth=1.2,
+                color=f"C{(first + i) % 10}", marker=MARKERS[-1 - i % len(MARKERS)], markersize=5,
+                markerfacecolor="none", markevery=(i % 2, 2), label=f"{key} (baseline)")
+    ax.set_xlabel(xlabel or value_key)
     ax.set_ylabel(ylabel or metric)
-    ax.set_title(title or f"{metric} against {value_key}")
+    ax.set_title(title or f"{metric} against {xlabel or value_key}")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
+    legend_beside(ax)
     return fig

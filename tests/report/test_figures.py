@@ -1,0 +1,168 @@
+"""Figure code: readable ticks, distinguishable coinciding curves, legends beside the data, the consistency band."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from matplotlib.collections import PolyCollection
+from matplotlib.figure import Figure
+
+from pursuit.engine import monte_carlo
+from pursuit.report.figures import consistency_over_time, figure_problems, rmse_over_time
+from pursuit.report.sweep_figures import metric_against_value
+
+from ..engine.helpers import SMALL, small_filters
+
+
+@pytest.fixture(scope="module")
+def twins():
+    """Three filters, the last a copy of the first under another name: their curves coincide exactly."""
+    filters = small_filters()
+    twin = dataclasses.replace(filters[0], name=f"{filters[0].name}-twin")
+    return monte_carlo(SMALL, [*filters, twin], 6, 3)
+
+
+def _series(ax):
+    return [ln for ln in ax.lines if not ln.get_label().startswith("_") and ln.get_transform() == ax.transData]
+
+
+def test_coinciding_curves_are_drawn_distinguishably_and_named(twins):
+    fig = rmse_over_time(twins, "position", log=True)
+    assert figure_problems(fig) == []
+    ax = fig.get_axes()[0]
+    lines = _series(ax)
+    styles = {(ln.get_linestyle(), ln.get_marker()) for ln in lines}
+    assert len(styles) == len(lines)  # no two series drawn alike
+    first = twins.filter_names[0]
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert f"{first}-twin (= {first})" in labels
+
+
+def test_figure_problems_flags_curves_drawn_alike_on_top_of_each_other():
+    fig = Figure(layout="constrained")
+    ax = fig.add_subplot()
+    ax.plot([0, 1, 2], [1, 2, 3], label="STF", color="k")
+    ax.plot([0, 1, 2], [1, 2, 3], label="EWFMKF", color="k")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("position RMSE (m)")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1))
+    assert any("coincide and are drawn alike" in p for p in figure_problems(fig))
+
+
+def test_log_axes_have_plain_tick_labels(twins):
+    fig = rmse_over_time(twins, "position", log=True)
+    fig.draw_without_rendering()
+    ax = fig.get_axes()[0]
+    texts = [t.get_text() for t in (*ax.get_yticklabels(), *ax.get_yticklabels(minor=True)) if t.get_text()]
+    assert texts and not any("times" in t or "^" in t for t in texts)
+    # the check that keeps it so: matplotlib's default log labels are flagged
+    bare = Figure(layout="constrained")
+    bx = bare.add_subplot()
+    bx.plot([1, 2, 3], [2.0, 3.0, 5.0])
+    bx.set_yscale("log")
+    bx.set_xlabel("time (s)")
+    bx.set_ylabel("RMSE (m)")
+    assert any("scientific notation" in p for p in figure_problems(bare))
+
+
+def test_a_legend_over_the_data_is_a_problem():
+    fig = Figure(layout="constrained")
+    ax = fig.add_subplot()
+    t = np.linspace(0.0, 1.0, 50)
+    ax.plot(t, np.full_like(t, 0.5), label="EKF")
+    ax.plot(t, t, label="UKF")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("x (m)")
+    ax.legend(loc="center")
+    assert any("legend covers" in p for p in figure_problems(fig))
+
+
+def test_bare_symbol_x_label_is_a_problem():
+    fig = Figure(layout="constrained")
+    ax = fig.add_subplot()
+    ax.plot([0, 1], [0, 1])
+    ax.set_xlabel("l")
+    ax.set_ylabel("wall time (s)")
+    assert any("names no quantity" in p for p in figure_problems(fig))
+
+
+def test_consistency_figure_draws_the_chi_square_band(twins):
+    fig = consistency_over_time(twins)
+    assert figure_problems(fig) == []
+    axes = fig.get_axes()
+    assert [ax.get_ylabel() for ax in axes] == ["ANEES (average over runs)", "ANIS (average over runs)"]
+    name = twins.filter_names[0]
+    for ax, what in zip(axes, ("nees", "nis")):
+        assert ax.get_yscale() == "log"
+        bands = [c for c in ax.collections if isinstance(c, PolyCollection)]
+        assert [b.get_label() for b in bands] == ["χ² 95 % band"]
+        lo, hi = twins.consistency_bounds(name, what)
+        ys = bands[0].get_paths()[0].vertices[:, 1]
+        assert np.isclose(ys.min(), np.nanmin(lo)) and np.isclose(ys.max(), np.nanmax(hi))
+        values = {ln.get_label().split(" (")[0]: ln.get_ydata() for ln in _series(ax)}
+        assert np.array_equal(values[name], getattr(twins, f"a{what}")(name), equal_nan=True)
+        assert "χ² 95 % band" in [t.get_text() for t in ax.get_legend().get_texts()]
+
+
+def test_sweep_baselines_are_named_in_the_legend_not_overprinted():
+    rows = [
+        {"filter": f, "variant": v, "l": l, "wall_time_s": w, "ci95": 0.1}
+        for v, scale in (("1 node (P1)", 1.0), ("4 corner nodes", 4.0))
+        for f in ("UPF", "UPF-local")
+        for l, w in ((0.0, scale), (0.5, 3 * scale), (1.0, 9 * scale))
+    ]
+    rows += [{"filter": "UKF", "variant": "1 node (P1)", "l": None, "wall_time_s": 0.9},
+             {"filter": "UKF", "variant": "4 corner nodes", "l": None, "wall_time_s": 1.0}]
+    fig = metric_against_value(rows, "l", "wall_time_s", error_key="ci95", xlabel="UKF fraction l", ylabel="wall time (s)")
+    assert figure_problems(fig) == []
+    ax = fig.get_axes()[0]
+    assert len(ax.texts) == 0  # no labels written into the plot, where two close baselines overprint
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "UKF, 1 node (P1) (baseline)" in labels and "UKF, 4 corner nodes (baseline)" in labels
+    base = [ln for ln in _series(ax) if "baseline" in ln.get_label()]
+    assert len({(str(ln.get_linestyle()), ln.get_color()) for ln in base}) == 2
+    swept = {ln.get_color() for ln in _series(ax) if "baseline" not in ln.get_label()}
+    assert not swept & {ln.get_color() for ln in base}  # baseline colours differ from every swept series'
+    assert ax.get_xlabel() == "UKF fraction l"
+
+
+@pytest.mark.parametrize("low, high, expected", [(2.1e-3, 2.7e-3, "0.0025"), (0.5, 3e4, "10000"), (1.2, 6.5, "3")])
+def test_log_tick_labels_are_plain_numbers(low, high, expected):
+    from pursuit.report.figures import plain_log_ticks
+
+    fig = Figure()
+    ax = fig.add_subplot()
+    ax.plot([0, 1], [low, high])
+    ax.set_yscale("log")
+    plain_log_ticks(ax)
+    fig.draw_without_rendering()
+    texts = [t.get_text() for t in (*ax.get_yticklabels(), *ax.get_yticklabels(minor=True)) if t.get_text()]
+    assert expected in texts and not any("e+" in t or "times" in t for t in texts), texts
+
+
+def test_consistency_figure_of_a_diverged_filter_draws_and_says_where_it_clipped(twins):
+    import copy
+
+    broken = copy.deepcopy(twins)
+    name = broken.filter_names[0]
+    fr = broken.filters[name]
+    fr.estimates[5:] = 1e100  # diverged: NEES ~1e200
+    broken.statistics = None  # recompute from the arrays
+    assert np.nanmax(broken.anees(name)) > 1e150
+    fig = consistency_over_time(broken)
+    fig.canvas.print_figure(__import__("io").BytesIO(), format="png")
+    ax = fig.get_axes()[0]
+    assert name in ax.get_title() and "1e+12" in ax.get_title(), ax.get_title()
+    drawn = next(ln for ln in _series(ax) if ln.get_label().split(" (")[0] == name).get_ydata()
+    assert np.nanmax(drawn) == 1e12
+
+
+def test_log_tick_at_infinity_gets_no_label():
+    """An axis stretched to the float limit asks for a label at inf (p1-wsn's ICS-PF): '' rather than OverflowError."""
+    from pursuit.report.figures import _PlainLogFormatter
+
+    fmt = _PlainLogFormatter()
+    fmt.set_axis(Figure().add_subplot().yaxis)
+    assert fmt(np.inf) == "" and fmt(0.0) == ""
