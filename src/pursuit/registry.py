@@ -13,8 +13,8 @@ listed in ``_COMPONENT_MODULES`` are imported on first use.
 from __future__ import annotations
 
 import importlib
-from dataclasses import dataclass, field
 import math
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 if TYPE_CHECKING:

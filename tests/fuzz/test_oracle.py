@@ -8,8 +8,8 @@ import tomllib
 import pytest
 
 from .config_cases import EXPERIMENTS
-from .track_cases import csv_line_oracle, jsonl_line_oracle
 from .tomlgen import dumps
+from .track_cases import csv_line_oracle, jsonl_line_oracle
 
 
 @pytest.mark.parametrize("line", ["6.0,A1,inf", "11.0,A5,1.0", "17.0,A1", "25.0,A1,100.8.938", "1.0,A1,４１.5", "1.0,A1,1_000",

@@ -29,7 +29,6 @@ paired differences are run by run.
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any

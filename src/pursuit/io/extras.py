@@ -10,13 +10,12 @@ into place).
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import Any, Iterable, Iterator, TextIO
 
 import numpy as np
 
+from .output_file import replace_with
 from .records import Record
 from .truth import Truth, TruthError, format_score, read_truth, score
 
@@ -123,19 +122,4 @@ class Extras:
             labels=(m.state_labels[i], m.state_labels[j]),
             title=f"{m.name}: {len(self.estimates)} estimates",
         )
-        target = Path(self.plot)
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=target.suffix, dir=target.parent)
-        os.close(fd)
-        try:
-            os.chmod(tmp, 0o666 & ~_umask())  # a new file's usual permissions, not mkstemp's 0600
-            fig.savefig(tmp, dpi=150)
-            os.replace(tmp, target)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+        replace_with(self.plot, lambda tmp: fig.savefig(tmp, dpi=150))  # written whole or not at all

@@ -45,8 +45,8 @@ from ..gaussian import Gaussian
 from ..models.measurement import LinearGaussian, RangeSensors, TimeOfArrival
 from ..models.sensors import BearingSensors, stack
 from ..registry import REQUIRED, Component, Param
-from .input_spec import InputSpec, build_input_spec
 from .initiate import INITIATION_PARAMS, Initiation
+from .input_spec import InputSpec, build_input_spec
 from .motions import IMM_FILTERS, MOTION_EXTRA_PARAMS, MOTION_TYPES, build_imm, build_motion, imm_motions
 
 __all__ = ["Sensor", "TrackModel", "load_track_model", "build_track_model", "SENSOR_TYPES", "DEFAULT_VALID"]

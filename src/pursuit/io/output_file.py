@@ -18,7 +18,7 @@ import os
 import stat
 import tempfile
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, Callable
 
 __all__ = ["same_file", "same_file_as_stream", "write_whole"]
 
@@ -45,6 +45,33 @@ def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+def replace_with(path: str | os.PathLike, produce: Callable[[str], None]) -> None:
+    """Have ``produce`` write a temporary file beside ``path``, then rename it into place.
+
+    For writers that want a file name rather than text (``Figure.savefig``
+    picks the format from the suffix, which the temporary file keeps).  The
+    file gets the mode of the regular file it replaces, or the default mode
+    less the umask; a symbolic link is followed to its target.  On any
+    failure (or interruption) the temporary file is removed and ``path`` is
+    unchanged.
+    """
+    target = Path(os.path.realpath(path))
+    try:
+        st = os.stat(target)
+    except FileNotFoundError:
+        st = None
+    mode = stat.S_IMODE(st.st_mode) if st is not None and stat.S_ISREG(st.st_mode) else 0o666 & ~_umask()
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=target.suffix, dir=target.parent)
+    os.close(fd)
+    try:
+        os.chmod(tmp, mode)
+        produce(tmp)
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
 
 
 def write_whole(path: str | os.PathLike, text: str) -> None:

@@ -285,7 +285,6 @@ def fading_over_time(
     ncols = 2 if share else 1
     fig = Figure(figsize=(6.4 * (1.7 if share else 1.0), 2.6 * max(len(panels), 1) + 0.6), layout="constrained")
     grid = fig.subplots(len(panels), ncols, sharex=True, squeeze=False)
-    axes = grid[:, 0]
     for row, (panel, result) in zip(grid, panels):
         ax = row[0]
         names = list(filters) if filters is not None else result.filter_names
