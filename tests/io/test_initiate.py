@@ -222,3 +222,53 @@ def test_the_two_point_prior_from_ranges_is_consistent_over_many_runs():
     e = nees(np.array(means)[None], np.array(covs)[None], x2[None])[0]
     lo, hi = chi2_bounds(4, M, level=0.999)
     assert lo < e.mean() < hi, (e.mean(), lo, hi)
+
+
+# --------------------------------------------------------------------------
+# the limits a [prior] and each step's measurements get hold for a prior built from the data
+# (found in review: a traceback, and silent nonsense from 1e300 fixes)
+# --------------------------------------------------------------------------
+MIXED = """\
+[motion]
+type = "cv"
+ndim = 2
+q = 0.01
+
+[[sensors]]
+id = "G"
+type = "position"
+sigma = 1.0e6
+
+[[sensors]]
+id = "R"
+type = "range"
+position = [0.0, 0.0]
+sigma = 1.0e-3
+
+[filter]
+type = "ekf"
+"""
+
+
+def test_a_two_point_prior_too_wide_for_the_precise_sensors_is_not_used_and_said(tmp_path, capsys):
+    # fixes of σ = 1e6 m give a prior 1e18 times the 1 mm range's variance: float64 cannot update with it
+    model = tmp_path / "model.toml"
+    model.write_text(MIXED)
+    data = tmp_path / "d.csv"
+    data.write_text("time,sensor,x,y\n0,G,10,20\n1,G,11,21\n2,G,12,22\n")
+    assert main(["track", str(data), "--config", str(model)]) == 0  # was a ValueError traceback (exit 1)
+    out, err = capsys.readouterr()
+    assert "Traceback" not in err
+    warned = [line for line in err.splitlines() if "the two-point prior from time 0.0 is unusable: prior.cov: too large" in line]
+    assert len(warned) == 2  # lines 3 and 4: each pair with the first fix gives that prior
+    assert [row.split(",")[-1] for row in out.splitlines()[1:]] == ["init"]  # only the one-point estimate of the first fix
+
+
+def test_fixes_beyond_what_the_filters_can_square_do_not_start_a_track(tmp_path):
+    model = _model(tmp_path, GPS.replace("sigma = [2.0, 3.0]", "sigma = [2.0, 3.0]\nvalid = [-1e300, 1e300]"))
+    rows = [(0.0, "gps", 1e300, 20.0), (1.0, "gps", -1e300, 21.0), (2.0, "gps", 12.0, 22.0), (3.0, "gps", 13.0, 23.0)]
+    res = _track(model, rows)
+    assert [p.line for p in res.dropped] == [2, 3]
+    assert all("beyond ±2^500" in p.message for p in res.dropped)
+    assert [e.time for e in res.estimates] == [2.0, 3.0]  # started from the sane fixes
+    np.testing.assert_array_equal(res.estimates[-1].mean, [13.0, 1.0, 23.0, 1.0])

@@ -163,3 +163,43 @@ def test_pursuit_run_on_an_imm_model_says_it_is_a_track_model(tmp_path, capsys):
     path.write_text(IMM + SENSORS + '\n[filter]\ntype = "kf"\n')
     assert main(["run", str(path)]) == 2
     assert "this is a `pursuit track` model file, not an experiment" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------
+# magnitude checks reach every mode of an [imm] (found in review: they read [motion] and the IMM only)
+# --------------------------------------------------------------------------
+PRIOR6 = """
+[[sensors]]
+id = "gps"
+type = "position"
+sigma = 5.0
+
+[prior]
+mean = [0.0, 1.0, 0.0, 0.0, 1.0, 0.0]
+cov = [100.0, 10.0, 1.0, 100.0, 10.0, 1.0]
+"""
+
+
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        ("type = \"ct\"\nomega = 0.1\nq = 0.01", "type = \"ct\"\nomega = 0.1\nq = 1e20", "imm.modes[1].q: the process noise of one 1 s step is"),
+        ("type = \"cv\"\nq = 0.01", "type = \"singer\"\nalpha = 0.1\nsigma = 1e12", "imm.modes[0].sigma: the process noise"),
+    ],
+)
+def test_every_imm_modes_process_noise_is_checked_and_named(tmp_path, old, new, message):
+    assert old in IMM
+    with pytest.raises(ConfigError, match=re.escape(message)) as e:
+        _load(tmp_path, IMM.replace(old, new) + PRIOR6 + '\n[filter]\ntype = "kf"\n')
+    assert e.value.line is not None  # the mode's own line, not "199 bad records" after loading
+    _load(tmp_path, IMM + PRIOR6 + '\n[filter]\ntype = "kf"\n')  # the same file with sane values loads
+
+
+def test_a_singer_models_noise_is_named_by_its_sigma(tmp_path):
+    with pytest.raises(ConfigError, match=re.escape("motion.sigma: the process noise of one 1 s step is")):
+        _load(tmp_path, "[motion]\ntype = \"singer\"\nalpha = 0.1\nsigma = 1e12\nndim = 2\n" + PRIOR6 + '\n[filter]\ntype = "kf"\n')
+
+
+def test_the_fading_limit_holds_for_every_imm_mode(tmp_path):
+    with pytest.raises(ConfigError, match=re.escape("filter.fading: 1e+06 is beyond 2^13")):
+        _load(tmp_path, IMM + SENSORS + '\n[filter]\ntype = "ekf"\nfading = 1.0e6\n')

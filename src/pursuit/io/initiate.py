@@ -33,6 +33,8 @@ from typing import Any, Generator, Iterable
 
 import numpy as np
 
+from .._validation import MAX_MEASUREMENT
+from ..filters.gaussian import check_prior_against_noise
 from ..gaussian import Gaussian
 from ..initiation import ACCELERATION_SIGMA, VELOCITY_SIGMA, multilaterate, one_point, polar_to_cartesian, two_point
 from ..registry import Param
@@ -92,6 +94,8 @@ def position_from_step(step: Step, model: Any) -> tuple[np.ndarray, np.ndarray]:
         raise NoFix("its measurements give no position with a positive definite covariance") from None
     if not (np.all(np.isfinite(p)) and np.all(np.isfinite(C))):
         raise NoFix("its measurements give no finite position")
+    if np.any(np.abs(p) > MAX_MEASUREMENT):  # the filters refuse such values too: they are squared
+        raise NoFix(f"its position {p.tolist()} is beyond ±2^500, too large for the filters to square")
     try:
         Gaussian(p, C)  # the same check the prior will get
     except ValueError:
@@ -179,6 +183,12 @@ def initiate(steps: Iterable[Any], model: Any, estimate: Any) -> Generator[Any, 
         except ValueError as e:  # dt so small that (p2 - p1)/dt or C/dt² overflows
             for line in event.lines:
                 yield Dropped(line, f"not used to start the track: two-point differencing from time {t1!r} fails ({e})")
+            continue
+        try:  # the check a [prior] gets when the model file loads (pursuit.io.model._check_magnitudes)
+            check_prior_against_noise(model.measurement, prior.mean, prior.cov)
+        except ValueError as e:
+            for line in event.lines:
+                yield Dropped(line, f"not used to start the track: the two-point prior from time {t1!r} is unusable: {e}")
             continue
         yield estimate(event, prior, ("init",))
         return replace(model, prior=prior, prior_time=event.time)

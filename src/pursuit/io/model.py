@@ -267,16 +267,39 @@ def _check_magnitudes(motion: Any, measurement: Any, prior: Gaussian | None, fil
         check_prior_against_noise(measurement, prior.mean, prior.cov, names=names)
     except ValueError as e:
         raise ValueError(str(e).replace("scale the prior covariance by", "scale prior.cov by", 1)) from None
-    with np.errstate(over="ignore", invalid="ignore"):  # an overflowing Q is refused just below
-        Q = np.asarray(motion.cov(1, motion.dt), dtype=float)
-    try:
-        check_prior_against_noise(measurement, prior.mean, Q, names=names)
-    except ValueError as e:
-        msg = str(e).split(":", 1)[1].replace("scale the prior covariance by", "scale motion.q by", 1)
-        raise ValueError(f"motion.q: the process noise of one {motion.dt:g} s step is{msg}") from None
+    for field, mode_motion, mode_measurement, mean in _noise_sources(motion, measurement, prior, filt):
+        with np.errstate(over="ignore", invalid="ignore"):  # an overflowing Q is refused just below
+            Q = np.asarray(mode_motion.cov(1, mode_motion.dt), dtype=float)
+        try:
+            check_prior_against_noise(mode_measurement, mean, Q, names=names)
+        except ValueError as e:
+            msg = str(e).split(":", 1)[1].replace("scale the prior covariance by", f"scale {field} by", 1)
+            raise ValueError(f"{field}: the process noise of one {mode_motion.dt:g} s step is{msg}") from None
+
+
+def _noise_sources(motion: Any, measurement: Any, prior: Gaussian, filt: Any) -> list[tuple[str, Any, Any, np.ndarray]]:
+    """(field that sets Q, motion, measurement model, prior mean in that motion's state) for each motion in use.
+
+    One for ``[motion]``; one per mode for ``[imm]``, each in its own state (the
+    prior mean mapped there), so every mode's process noise is checked and named.
+    """
+
+    def param(m: Any) -> str:  # what scales Q: a Singer model's acceleration sigma, the others' q
+        return "sigma" if type(m).__name__ == "Singer" else "q"
+
+    modes, maps = getattr(filt, "filters", None), getattr(filt, "maps", None)
+    if modes is None or maps is None or not all(hasattr(f, "motion") for f in modes):
+        return [(f"motion.{param(motion)}", motion, measurement, prior.mean)]
+    out = []
+    for i, (f, m) in enumerate(zip(modes, maps)):
+        mean = prior.mean if m is None else m.to_mode(prior.mean, prior.cov)[0]
+        out.append((f"imm.modes[{i}].{param(f.motion)}", f.motion, f.measurement, mean))
+    return out
 
 
 def _check_fading(filt: Any) -> None:
+    for f in getattr(filt, "filters", ()):  # an IMM's modes each take the [filter] table's fading
+        _check_fading(f)
     lam = getattr(getattr(filt, "fading", None), "lam", None)
     if isinstance(lam, float) and lam > _MAX_FADING:
         raise ValueError(
