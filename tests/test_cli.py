@@ -321,3 +321,37 @@ def test_output_is_light_unless_full_data_is_asked_for(tmp_path):
             runs[kind] = sorted({int(r["run"]) for r in csv.DictReader(fh)})
     assert runs == {"light": [0, 1], "full": [0, 1, 2, 3, 4, 5]}
     assert (tmp_path / "light" / "per_step.csv").read_bytes() == (tmp_path / "full" / "per_step.csv").read_bytes()
+
+
+# --------------------------------------------------------------------------
+# found in review
+# --------------------------------------------------------------------------
+def test_full_data_on_summary_results_says_what_was_saved(tmp_path, config):
+    # --store summary keeps only the first runs whatever --full-data says: the folder must not claim "full"
+    out = tmp_path / "sf"
+    args = ["run", str(config), "--no-progress", "--no-pdf", "--store", "summary", "--keep-runs", "1", "--full-data", "-o", str(out)]
+    assert main(args) == 0
+    assert pursuit_load(out).sidecar["data"] == "light: per-step summaries of every run, runs 0..0 kept whole"
+    none_kept = tmp_path / "none"
+    assert main(["run", str(config), "--no-progress", "--no-pdf", "--keep-runs", "0", "-o", str(none_kept)]) == 0
+    assert pursuit_load(none_kept).sidecar["data"] == "light: per-step summaries of every run, no run kept whole"
+
+
+def test_a_bad_memory_limit_is_one_line_and_exit_2(config, tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("PURSUIT_MEMORY_LIMIT", "abc")
+    assert main(["run", str(config), "--no-progress", "-o", str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err == "pursuit: error: $PURSUIT_MEMORY_LIMIT: expected a positive size such as 8G or 500M, got 'abc'\n"
+
+
+def test_the_output_folder_may_be_the_working_directory(config, tmp_path, monkeypatch):
+    here = tmp_path / "here"
+    here.mkdir()
+    monkeypatch.chdir(here)
+    assert main(["run", str(config), "--no-progress", "--no-pdf", "-o", "."]) == 0  # was: ValueError, '.' has an empty name
+    assert (here / "run.json").exists() and [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def pursuit_load(folder):
+    import pursuit
+
+    return pursuit.load(folder)

@@ -216,6 +216,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_NO_WORKERS
 
 
+def _memory_limit_problem() -> str | None:
+    """What is wrong with ``$PURSUIT_MEMORY_LIMIT``, if set and not a size (checked before anything runs)."""
+    from .engine.memory import available_bytes
+
+    try:
+        available_bytes()
+    except ValueError as e:
+        return str(e)
+    return None
+
+
 def _workers_lost(e: Exception) -> bool:
     """Whether ``e`` is the engine's ``WorkerLost``, without importing the engine (and NumPy) to ask.
 
@@ -227,6 +238,11 @@ def _workers_lost(e: Exception) -> bool:
 
 
 def _dispatch(args) -> int:
+    if args.command in ("run", "reproduce"):
+        problem = _memory_limit_problem()
+        if problem:
+            print(f"pursuit: error: {problem}", file=sys.stderr)
+            return EXIT_BAD_INPUT
     if args.command == "list":
         return _cmd_list(args)
     if args.command == "run":

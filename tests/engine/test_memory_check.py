@@ -175,3 +175,32 @@ def test_a_maneuvering_target_with_an_enormous_horizon_is_refused_before_its_tru
     assert time.perf_counter() - t0 < 5
     small = ManeuveringTarget(horizon=50)
     assert small.true_states().shape == (50, 9) and small.true_states() is small.true_states()
+
+
+def test_workers_beyond_the_number_of_chunks_are_not_counted(monkeypatch):
+    # found in review: --workers 8 with one chunk was planned as 8 chunks in flight
+    from pursuit.engine import montecarlo
+
+    seen = []
+    real = montecarlo.check_memory
+    monkeypatch.setattr(montecarlo, "check_memory", lambda *a, **k: (seen.append(k["in_flight"]), real(*a, **k))[1])
+    from .helpers import SMALL, small_filters
+
+    montecarlo.monte_carlo(SMALL, small_filters(), 6, 1, chunk_size=3, backend=Serial8())
+    assert seen == [2]  # two chunks of 3 runs, not eight
+
+
+class Serial8:
+    """A backend that says it has 8 workers and computes in this process (what check_memory is told is the point)."""
+
+    workers = 8
+
+    def map_chunks(self, task, spans, on_result, **serial_kwargs):
+        for span in spans:
+            on_result(span, task(*span, **serial_kwargs))
+
+    def describe(self):
+        return {"backend": "test", "workers": 8}
+
+    def close(self):
+        pass

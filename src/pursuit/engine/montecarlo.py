@@ -506,12 +506,14 @@ def monte_carlo(
         backend = owned = make_backend(scheduler=backend)
 
     # Refuse what cannot fit before computing anything (one line naming the setting to change).
-    # A local pool computes up to `workers` chunks at once, each in its own process on this machine.
+    # A local pool computes up to `workers` chunks at once, each in its own process on this machine,
+    # and never more chunks than there are.
     workers = getattr(backend, "workers", None)
+    chunks_at_once = workers if isinstance(workers, int) and not isinstance(backend, Serial) else 1
     try:
         check_memory(
             scenario, filters, runs, chunk_size, store=store, keep_cov=keep_cov,
-            in_flight=workers if isinstance(workers, int) and not isinstance(backend, Serial) else 1,
+            in_flight=max(1, min(chunks_at_once, len(_chunks(runs, chunk_size)))),
             can_summarise=can_summarise,
         )
     except BaseException:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import platform
 import shutil
 import sys
@@ -97,6 +98,18 @@ def _write_csv(path: Path, table: Table) -> None:
             w.writerow(["" if v is None else (repr(float(v)) if isinstance(v, (float, np.floating)) else v) for v in row])
 
 
+def _runs_kept_whole(results: dict[str, Any]) -> int | None:
+    """How many runs the saved results keep whole (the fewest over them); None when all are full-mode."""
+    summary = [r for r in results.values() if r.store == "summary"]
+    if not summary:
+        return None
+    return min(r.examples.runs if r.examples is not None else 0 for r in summary)
+
+
+def _describe_kept(kept: int) -> str:
+    return f"runs 0..{kept - 1} kept whole" if kept else "no run kept whole"
+
+
 def write_output(
     output: ExperimentOutput,
     out_dir: str | Path,
@@ -151,7 +164,7 @@ def write_output(
     from .html import write_report
 
     formats = tuple(dict.fromkeys(("png", *formats)))
-    out_dir = Path(out_dir)
+    out_dir = Path(os.path.abspath(out_dir))  # "." has no name to put the helper folders beside
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     recover(out_dir)  # what a killed earlier writer of out_dir left behind
     tmp = make_temp(out_dir)
@@ -168,8 +181,9 @@ def write_output(
         if mc:
             write_errors_csv(tmp / "errors.csv", output.name, mc)
             write_per_step_csv(tmp / "per_step.csv", output.name, monte_carlo_results(output.results))
-            files["errors.csv"] = FILES["errors.csv"] if full_data or all(r.store == "full" for r in mc.values()) else (
-                FILES["errors.csv"] + f" (only runs kept whole: the first {keep_runs}; --full-data lists every run)")
+            kept = _runs_kept_whole(mc)
+            files["errors.csv"] = FILES["errors.csv"] if kept is None else (
+                FILES["errors.csv"] + f" (only runs kept whole: {_describe_kept(kept)}; --full-data lists every run)")
             files["per_step.csv"] = FILES["per_step.csv"]
         manifest = save_results(saved, tmp / "results")
         if output.figures:
@@ -188,8 +202,9 @@ def write_output(
         if command:
             sidecar["command"] = command
         if mc:
-            light = not full_data and any(r.store == "summary" for r in mc.values())
-            sidecar["data"] = f"light: per-step summaries of every run, runs 0..{keep_runs - 1} kept whole" if light else "full"
+            # from what was saved, not from the flag: --full-data cannot bring back a summary-mode result's runs
+            kept = _runs_kept_whole(mc)
+            sidecar["data"] = "full" if kept is None else f"light: per-step summaries of every run, {_describe_kept(kept)}"
         sidecar["written"] = datetime.now(timezone.utc)
         sidecar["versions"] = versions()
         sidecar["tables"] = {
