@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import threading
@@ -23,8 +24,25 @@ def small_filters():
     return [pu.ExtendedKalmanFilter(SMALL.motion, SMALL.measurement), pu.CubatureKalmanFilter(SMALL.motion, SMALL.measurement)]
 
 
+class _WrappedScenario:
+    """A test scenario around ``inner`` (a dataclass field of the subclass): everything it does not define is ``inner``'s.
+
+    Its own fields and dunder names are never looked up on ``inner``: unpickling in a worker
+    asks for them before they are set, and must get AttributeError, not a recursion.
+    """
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("__") or name in {f.name for f in dataclasses.fields(self)}:
+            raise AttributeError(name)
+        return getattr(self.inner, name)
+
+    @property
+    def name(self) -> str:
+        return self.inner.name
+
+
 @dataclass(frozen=True)
-class PauseOnce:
+class PauseOnce(_WrappedScenario):
     """A scenario that, the first time any process simulates with it, writes its pid and waits.
 
     The first caller (chosen atomically through ``O_EXCL`` on ``marker``)
@@ -36,15 +54,6 @@ class PauseOnce:
     inner: Any
     marker: str
     pause_s: float = 120.0
-
-    def __getattr__(self, name: str) -> Any:
-        if name in ("inner", "marker", "pause_s") or name.startswith("__"):
-            raise AttributeError(name)
-        return getattr(self.inner, name)
-
-    @property
-    def name(self) -> str:
-        return self.inner.name
 
     def simulate(self, rng, runs=None):
         try:
@@ -58,20 +67,11 @@ class PauseOnce:
 
 
 @dataclass(frozen=True)
-class Slow:
+class Slow(_WrappedScenario):
     """A scenario that sleeps before simulating, so chunks finish one by one."""
 
     inner: Any
     delay_s: float
-
-    def __getattr__(self, name: str) -> Any:
-        if name in ("inner", "delay_s") or name.startswith("__"):
-            raise AttributeError(name)
-        return getattr(self.inner, name)
-
-    @property
-    def name(self) -> str:
-        return self.inner.name
 
     def simulate(self, rng, runs=None):
         time.sleep(self.delay_s)
@@ -79,19 +79,10 @@ class Slow:
 
 
 @dataclass(frozen=True)
-class Failing:
+class Failing(_WrappedScenario):
     """A scenario whose simulation raises (a bug in user code), to check it is not retried."""
 
     inner: Any
-
-    def __getattr__(self, name: str) -> Any:
-        if name == "inner" or name.startswith("__"):
-            raise AttributeError(name)
-        return getattr(self.inner, name)
-
-    @property
-    def name(self) -> str:
-        return self.inner.name
 
     def simulate(self, rng, runs=None):
         raise ValueError("deliberate failure in simulate")
@@ -162,7 +153,7 @@ def assert_same_summary(a, b) -> None:
 
 
 @dataclass(frozen=True)
-class KillsItsWorker:
+class KillsItsWorker(_WrappedScenario):
     """A scenario that SIGKILLs the worker process simulating with it, every time (a worker that keeps dying).
 
     In a process not started by :mod:`multiprocessing` (the test runner
@@ -170,15 +161,6 @@ class KillsItsWorker:
     """
 
     inner: Any
-
-    def __getattr__(self, name: str) -> Any:
-        if name == "inner" or name.startswith("__"):
-            raise AttributeError(name)
-        return getattr(self.inner, name)
-
-    @property
-    def name(self) -> str:
-        return self.inner.name
 
     def simulate(self, rng, runs=None):
         import multiprocessing
@@ -216,22 +198,13 @@ def wait_until(condition, timeout: float, interval: float = 0.05) -> bool:
 
 
 @dataclass(frozen=True)
-class SlowButOnce:
+class SlowButOnce(_WrappedScenario):
     """A scenario whose first simulation (in any process, chosen through ``O_EXCL`` on ``marker``) is
     immediate and every later one sleeps ``delay_s`` first: one chunk finishes while others still run."""
 
     inner: Any
     marker: str
     delay_s: float = 60.0
-
-    def __getattr__(self, name: str) -> Any:
-        if name in ("inner", "marker", "delay_s") or name.startswith("__"):
-            raise AttributeError(name)
-        return getattr(self.inner, name)
-
-    @property
-    def name(self) -> str:
-        return self.inner.name
 
     def simulate(self, rng, runs=None):
         try:
