@@ -192,7 +192,7 @@ def test_a_signal_ends_a_run_with_workers_cleanly(tmp_path, sig, group, code, li
     import os
     import signal
 
-    from .engine.helpers import session_pids, wait_until
+    from .engine.helpers import end_session, session_pids, wait_until
 
     config = tmp_path / "exp.toml"
     config.write_text(LONG)
@@ -211,11 +211,7 @@ def test_a_signal_ends_a_run_with_workers_cleanly(tmp_path, sig, group, code, li
         assert proc.wait(30) == code, err.read_text()
         assert wait_until(lambda: not session_pids(proc.pid), 20), f"still alive: {session_pids(proc.pid)}"
     finally:
-        for pid in session_pids(proc.pid):
-            os.kill(pid, signal.SIGKILL)
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(30)
+        end_session(proc)
     assert err.read_text() == line + "\n"
     assert not out.exists() or list(out.iterdir()) == []
 

@@ -186,6 +186,15 @@ def session_pids(sid: int) -> list[int]:
     return sorted(pids)
 
 
+def end_session(proc) -> None:
+    """Kill whatever is left of ``proc``'s session (started with ``start_new_session=True``) and reap ``proc``."""
+    for pid in session_pids(proc.pid):
+        os.kill(pid, signal.SIGKILL)
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait(30)
+
+
 def wait_until(condition, timeout: float, interval: float = 0.05) -> bool:
     """Poll ``condition()`` until it is true or ``timeout`` seconds have passed; returns its last value."""
     deadline = time.monotonic() + timeout

@@ -22,6 +22,7 @@ from .helpers import (
     Slow,
     SlowButOnce,
     assert_same_result,
+    end_session,
     session_pids,
     small_filters,
     wait_until,
@@ -234,7 +235,6 @@ def test_workers_end_when_their_parent_is_killed(tmp_path):
     """SIGKILL the process that owns a pool (it cannot clean up): its workers, the forkserver and the
     resource tracker end within seconds, not when their 60 s chunks are done."""
     import os
-    import signal
     import subprocess
     from pathlib import Path
 
@@ -250,8 +250,4 @@ def test_workers_end_when_their_parent_is_killed(tmp_path):
         proc.wait(30)
         assert wait_until(lambda: not session_pids(proc.pid), 20), f"still alive: {session_pids(proc.pid)}"
     finally:
-        for pid in session_pids(proc.pid):
-            os.kill(pid, signal.SIGKILL)
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(30)
+        end_session(proc)
