@@ -50,7 +50,7 @@ register(
 )(Constant)
 
 TFMKF_LAMBDA = 1.23
-"""Paper P2's constant fading factor for TFMKF (from its ref. [12]; spec 03 §4.1)."""
+"""Paper P2's constant fading factor for TFMKF (from P2's own ref. [12]; docs/spec/03-fading-memory-ekf.md §4.1)."""
 
 
 @register(

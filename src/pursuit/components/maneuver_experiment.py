@@ -55,7 +55,7 @@ SETTLE_STEPS = 10
 _KNOWN_SECTIONS = {"scenario", "filters", "figures", "claims"}
 PAPER_NOTE = (
     "Paper P4 (Fang & Yang 2016) gives no usable numbers: its Table 2 (mean RMSE) and Table 1 (maneuver schedule) "
-    "are missing from the source, so the schedule is spec 04's invented default and only the qualitative claims "
+    "are missing, so the schedule is the invented one of docs/spec/04-adaptive-cs-model.md §3 and only the qualitative claims "
     "can be compared. z: paired z statistic over runs of the per-run RMSE difference (baseline - adaptive)."
 )
 

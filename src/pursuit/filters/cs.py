@@ -421,7 +421,7 @@ _ALPHA_RULES = ("ratio", "fading", "none")
 class AdaptiveCSFilter(_AxisFilter):
     """Parameter-adaptive CS filter (APCS) of paper P4, per axis.
 
-    Per step and axis (spec 04 §2.5):
+    Per step and axis (docs/spec/04-adaptive-cs-model.md §2.5):
 
     1. ā = â(k|k); x⁻ = F x + U ā (the constant-acceleration extrapolation).
     2. Nominal prediction with α0, λ = 1 and Q from the current σ_a²:

@@ -11,14 +11,14 @@ a running estimate of E[ν_k ν_kᵀ] (ν_k = z_k − h(x̂⁻_k)).  With λ_k i
 of 1, the filter's predicted innovation covariance H(λ P̄ + Q)Hᵀ + R matches
 Ĉ_k in trace.  The two strategies differ only in how they average ν νᵀ:
 
-* :class:`ExponentiallyWeighted` (EWFMKF of paper P2; spec 03 §4.2, a
+* :class:`ExponentiallyWeighted` (EWFMKF of paper P2; docs/spec/03-fading-memory-ekf.md §4.2, a
   reconstruction): Sage–Husa weights d_j = (1 − b)/(1 − b^{j+1}), so early
   steps are averaged with equal weight and later ones are forgotten at rate b;
-* :class:`StrongTracking` (Zhou Donghua's suboptimal fading factor; spec 03
+* :class:`StrongTracking` (Zhou Donghua's suboptimal fading factor; docs/spec/03-fading-memory-ekf.md
   §4.3): V_1 = ν_1ν_1ᵀ, V_j = (ρ V_{j−1} + ν_jν_jᵀ)/(1 + ρ), with a weakening
   factor β ≥ 1 on R.
 
-λ_max defaults to :data:`LAM_MAX` = 1e4, the bound spec 03 gives IFMKF, and
+λ_max defaults to :data:`LAM_MAX` = 1e4, the bound docs/spec/03-fading-memory-ekf.md §4.4 gives IFMKF, and
 the numerical ceiling max(1, κ tr R / tr(H P̄ Hᵀ)) (κ = 1/√ε, see
 :attr:`~pursuit.filters.fading.FadingContext.lam_ceiling`) applies whatever
 λ_max is.  Both bind only far from the TOA experiments' values (λ of order
@@ -46,7 +46,7 @@ from .fading import Fade, FadingContext
 __all__ = ["ExponentiallyWeighted", "StrongTracking", "TraceMemory", "diag_sandwich", "LAM_MAX"]
 
 LAM_MAX = 1.0e4
-"""Default upper bound on λ of the adaptive strategies (EWFMKF, STF, IFMKF): spec 03 §4.4's λ_max."""
+"""Default upper bound on λ of the adaptive strategies (EWFMKF, STF, IFMKF): the λ_max of docs/spec/03-fading-memory-ekf.md §4.4."""
 
 
 def diag_sandwich(H: np.ndarray, A: np.ndarray) -> np.ndarray:
@@ -110,7 +110,7 @@ class ExponentiallyWeighted:
         λ_k = min(λ_max, ceiling, max(1, tr(Ĉ − HQHᵀ − R) / tr(H P̄ Hᵀ))).
 
     Paper P2 gives only the name, a parameter b in (0, 1) and its reference
-    [14]; this form is the reconstruction of spec 03 §4.2 [RECON + LIT].
+    [14]; this form is the reconstruction of docs/spec/03-fading-memory-ekf.md §4.2 [RECON + LIT].
 
     Parameters
     ----------

@@ -3,7 +3,7 @@
 Paper P2 (Ma & Zheng 2022) keeps λ = 1 unless the filter is *abnormally*
 diverging, and then picks the λ that makes the updated estimate agree with
 the observation.  Its equation (3) is lost; this module implements the
-reconstruction of spec 03 §4.4, with every open choice a parameter:
+reconstruction of docs/spec/03-fading-memory-ekf.md §4.4, with every open choice a parameter:
 
 1. Residual of the preliminary prediction and its expected level
    (per step k, over the measured components)::
@@ -27,7 +27,7 @@ reconstruction of spec 03 §4.4, with every open choice a parameter:
    e_k > g·max(τ_k, m_{k−1}) (m_{k−1} = median of the previous L residuals)
    skips the measurement update at k (prediction only, λ = 1, even if the
    test of step 2 now reports divergence), at most G consecutive steps,
-   never in the first L.  Spec 03 gates only when m_{k−1} ≤ τ; where that
+   never in the first L.  The spec gates only when m_{k−1} ≤ τ; where that
    holds the two rules agree.  Ours also gates a residual g times above a
    median that sits just over τ (measured on the TOA scenario: about 1 run
    in 300 at each step, and such a run then faded on the outlier), and
@@ -50,7 +50,7 @@ reconstruction of spec 03 §4.4, with every open choice a parameter:
        the measured components, the largest fading the innovation itself
        supports (with it, the predicted innovation covariance
        H(λP̄ + Q)Hᵀ + R matches ν νᵀ in trace);
-     - ``"lam_max"`` (spec 03's default): λ_max;
+     - ``"lam_max"`` (the spec's default): λ_max;
      - ``"minimise"``: the grid λ with the smallest post-fit residual.
 
      The trial update is one linearised step, so the level can be out of
@@ -163,7 +163,7 @@ class Improved:
         With ``search="consistent"``, what to do when λ_max does not bring
         the post-fit residual to β v: ``"innovation"`` (default; the
         one-step innovation-matching factor, see the module docstring),
-        ``"lam_max"`` (spec 03's choice; makes the UKF and CKF diverge) or
+        ``"lam_max"`` (the choice of docs/spec/03-fading-memory-ekf.md §4.4; makes the UKF and CKF diverge) or
         ``"minimise"`` (the grid minimiser of the post-fit residual; costs
         ``grid`` trial updates of the batch at each such step).
     """

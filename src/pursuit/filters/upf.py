@@ -1,4 +1,4 @@
-"""The partial-UKF unscented particle filter of patent CN101631395B (paper P3).
+"""The partial-UKF unscented particle filter of patent CN101631395B (paper P3; open choices U1-U8: docs/spec/02-upf-partial.md §7).
 
 Only a fraction l of the N particles, the "important" ones, get an
 unscented-Kalman proposal; the others are drawn from the transition prior

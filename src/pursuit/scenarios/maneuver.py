@@ -4,7 +4,7 @@ The truth is deterministic and the same in every run: piecewise constant
 acceleration per axis and constant-rate turns in a plane, integrated exactly
 over each sampling period, with no process noise.  Each run adds its own
 position measurement noise.  Paper P4's Table 1 (the schedule) is missing;
-:data:`DEFAULT_SCHEDULE` is the spec's invented one (spec 04 §3).
+:data:`DEFAULT_SCHEDULE` is the spec's invented one (docs/spec/04-adaptive-cs-model.md §3).
 
 Timing: step k (time t_k = kT) covers the period (t_{k−1}, t_k].  A segment
 ``start``–``stop`` (seconds, inclusive) acts on the steps whose t_k lies in
@@ -101,7 +101,7 @@ DEFAULT_SCHEDULE: tuple[Maneuver, ...] = (
     Maneuver(31, 45, axis="x", accel=15.0),
     Maneuver(51, 70, axis="z", accel=-5.0),
 )
-"""Spec 04 §3 [DEFAULT] schedule (P4's Table 1 is missing): y 0, +40 (21-35 s), 0, −30 (51-66),
+"""The [DEFAULT] schedule of docs/spec/04-adaptive-cs-model.md §3 (P4's Table 1 is missing): y 0, +40 (21-35 s), 0, −30 (51-66),
 +60 (67-80), 0; x +15 (31-45); z −5 (51-70); zero elsewhere."""
 
 _SEGMENT_KEYS = {"start", "stop", "axis", "accel", "plane", "rate"}

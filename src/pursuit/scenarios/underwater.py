@@ -5,7 +5,7 @@ array A(0,0), B(0,d), C(d,0) and sends acoustic pings; the hydrophones
 measure one-way travel times.  The filter may be given the three ranges
 (r_i = c t_i), the travel times themselves, or the closed-form position fix.
 
-Paper P2 compares the fading filters under three conditions (spec 03 §6.2):
+Paper P2 compares the fading filters under three conditions (docs/spec/03-fading-memory-ekf.md §6.2):
 
 ========  ==================  ===========================  =====================
 condition initial estimate    truth                         measurements

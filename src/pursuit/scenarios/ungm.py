@@ -1,4 +1,4 @@
-"""The UNGM benchmark scenario (paper P1 §4.1; Gordon, Salmond & Smith 1993)."""
+"""The UNGM benchmark scenario (paper P1 §4.1, docs/spec/01-particle-filters.md §6; Gordon, Salmond & Smith 1993)."""
 
 from __future__ import annotations
 
