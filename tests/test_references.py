@@ -41,6 +41,7 @@ HEADING = re.compile(r"^#{1,6}\s+(?P<title>.+?)\s*#*\s*$", re.M)
 NUMBERED = re.compile(r"^(\d+(?:\.\d+)*)\.?(?:\s|$)")
 ANCHOR = re.compile(r"<a\s+(?:id|name)=\"([^\"]+)\"")
 FENCE = re.compile(r"^ *```.*?^ *```[ \t]*$", re.S | re.M)
+INLINE_CODE = re.compile(r"`[^`\n]+`")
 
 
 @dataclass(frozen=True)
@@ -135,11 +136,12 @@ def _markdown_problems(path: Path, refs: list[Ref]) -> list[str]:
     text = path.read_text(encoding="utf-8")
     problems = []
     in_spec = path.parent == SPEC_DIR  # the notes themselves also say "file 03 §4.3", in code blocks too
-    if not in_spec:  # a code block cannot link: there the sources' rules hold
-        for block in FENCE.finditer(text):
-            problems += _code_problems(path, block.group(0), refs, _line(text, block.start()))
-    # blanked, not removed, so that offsets still give line numbers
-    text = FENCE.sub(lambda m: re.sub(r"[^\n]", " ", m.group(0)), text)
+    for code in (FENCE, INLINE_CODE):  # code cannot link: there the sources' rules hold
+        if not in_spec:
+            for block in code.finditer(text):
+                problems += _code_problems(path, block.group(0), refs, _line(text, block.start()))
+        # blanked, not removed, so that offsets still give line numbers
+        text = code.sub(lambda m: re.sub(r"[^\n]", " ", m.group(0)), text)
     for m in LINK.finditer(text):
         where = f"{_rel(path)}:{_line(text, m.start())}"
         target = m.group("target")
@@ -279,6 +281,8 @@ def test_a_broken_source_reference_fails(tmp_path, text, expected):
         ("```python\nx = 1  # docs/spec/03-fading-memory-ekf.md §4.4\n```", None),
         ("```python\nx = 1  # docs/spec/03-fading-memory-ekf.md §4.8\n```", "has no section §4.8"),
         ("```python\nx = 1  # spec 03 §4.4\n```", "cite docs/spec/NN-name.md"),
+        ("cited as `docs/spec/03-fading-memory-ekf.md §4.4` in code", None),
+        ("cited as `docs/spec/03-fading-memory-ekf.md §4.5` in code", "has no section §4.5"),
     ],
 )
 def test_a_broken_docs_reference_fails(tmp_path, text, expected):
