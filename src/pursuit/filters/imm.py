@@ -2,7 +2,7 @@
 
 The IMM runs r filters (modes) in parallel and mixes their estimates through
 a Markov chain of mode switches with transition matrix Π (``Π[i, j]`` =
-P{mode j at k | mode i at k − 1}).  One cycle [LIT]:
+P{mode j at k | mode i at k − 1}).  One cycle [LIT] (docs/spec/04-adaptive-cs-model.md §4.3):
 
 * predicted mode probabilities ``c̄_j = Σ_i Π_ij μ_i`` and mixing weights
   ``μ_{i|j} = Π_ij μ_i / c̄_j``;
