@@ -10,7 +10,7 @@ import pytest
 
 import pursuit
 from pursuit.engine import monte_carlo
-from pursuit.experiment import ExperimentOutput, Table
+from pursuit.tables import ExperimentOutput, Table
 from pursuit.report.output import write_output
 from pursuit.storage import load_result, save_result, write_errors_csv, write_per_step_csv
 
@@ -85,7 +85,7 @@ def test_per_step_csv_equals_the_summaries(full, summary, tmp_path):
 
 
 def _output(result) -> ExperimentOutput:
-    from pursuit.components.experiments import standard_figures, summary_table
+    from pursuit.experiments.montecarlo import standard_figures, summary_table
 
     return ExperimentOutput(
         "demo", "Demo", "A demo.", [summary_table(result)], standard_figures(result, SMALL, {}), results={"result": result}
@@ -148,7 +148,7 @@ def test_paper_tables_keep_their_kind(full, tmp_path):
 
 _KILLED_WRITER = r"""
 import os, sys, time
-from pursuit.experiment import ExperimentOutput, Table
+from pursuit.tables import ExperimentOutput, Table
 from pursuit.report.output import write_output
 
 class Blocks:

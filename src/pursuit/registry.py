@@ -6,38 +6,29 @@ type, its default and a check, so the config loader can refuse an unknown
 key, a wrong type or an impossible value with one line naming the field,
 before anything runs or is written.
 
-Modules register their own components with :func:`register`; the modules
-listed in ``_COMPONENT_MODULES`` are imported on first use.
+Modules register their own components with :func:`register`.  Every module
+of the packages in :data:`REGISTERING_PACKAGES` (:mod:`pursuit.config`, the
+registrations, and :mod:`pursuit.experiments`, the experiment kinds) is
+imported on first use, so a new module there registers without a line here.
 """
 
 from __future__ import annotations
 
 import importlib
 import math
+import pkgutil
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 if TYPE_CHECKING:
     import numpy as np
 
-__all__ = ["Param", "Component", "register", "get", "components", "REQUIRED", "KINDS"]
+__all__ = ["Param", "Component", "register", "get", "components", "REQUIRED", "KINDS", "REGISTERING_PACKAGES"]
 
 KINDS = ("scenario", "filter", "fading", "experiment", "model")
 
-# Modules whose import registers components.  Add a line when you add one.
-_COMPONENT_MODULES = (
-    "pursuit.components.models",
-    "pursuit.components.scenarios",
-    "pursuit.components.filters",
-    "pursuit.components.fading",
-    "pursuit.components.experiments",
-    "pursuit.components.maneuver",
-    "pursuit.components.maneuver_experiment",
-    "pursuit.components.underwater",
-    "pursuit.components.conditions",
-    "pursuit.components.particle",
-    "pursuit.components.sweep",
-)
+REGISTERING_PACKAGES = ("pursuit.config", "pursuit.experiments")
+"""Packages whose every module is imported (and so registers its components) on first look-up."""
 
 
 class _Required:
@@ -159,8 +150,15 @@ def _load() -> None:
     global _loaded
     if not _loaded:
         _loaded = True
-        for mod in _COMPONENT_MODULES:
-            importlib.import_module(mod)
+        for package in REGISTERING_PACKAGES:
+            for mod in _modules(package):
+                importlib.import_module(mod)
+
+
+def _modules(package: str) -> list[str]:
+    """The modules of ``package``, sorted by name (the import order does not matter: names are unique)."""
+    pkg = importlib.import_module(package)
+    return sorted(f"{package}.{info.name}" for info in pkgutil.iter_modules(pkg.__path__) if not info.ispkg)
 
 
 def get(kind: str, name: str, where: str = "") -> Component:

@@ -79,7 +79,7 @@ def test_index_page_links_every_report(chromium, artifacts, output):
 
 def _wide_output(folder: Path) -> Path:
     """An output folder whose summary table is as wide as p3-upf's (16 columns of four-decimal numbers)."""
-    from pursuit.experiment import ExperimentOutput, Table
+    from pursuit.tables import ExperimentOutput, Table
     from pursuit.report.output import write_output
 
     cols = ["variant", "l", "filter", "rmse", "ci95", "rms_x", "rms_vx", "rms_y", "rms_vy", "rmse_position",

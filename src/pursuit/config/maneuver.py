@@ -1,7 +1,7 @@
 """Registrations for maneuvering-target tracking: models, the ``maneuver-3d`` scenario, CS-family and IMM filters.
 
 The experiment kind ``maneuver`` (paper P4) lives in
-:mod:`pursuit.components.maneuver_experiment`.
+:mod:`pursuit.experiments.maneuver`.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from ..filters.imm import InteractingMultipleModel
 from ..models import maneuver as mm
 from ..registry import Param, register
 from ..scenarios.maneuver import DEFAULT_SCHEDULE, ManeuveringTarget, parse_schedule
-from .experiments import build_filter
+from .build import build_filter
 from .filters import GATE, NAME
 
 # --------------------------------------------------------------------------

@@ -38,7 +38,6 @@ import numpy as np
 from .. import metrics, registry
 from ..engine.montecarlo import FILTER_STREAM, SCENARIO_STREAM, monte_carlo
 from ..engine.snapshots import particle_snapshots
-from ..experiment import ExperimentOutput, Table
 from ..registry import Param, register
 from ..report.figures import consistency_over_time, labelled, rmse_over_time, trajectory
 from ..report.sweep_figures import (
@@ -47,8 +46,10 @@ from ..report.sweep_figures import (
     particle_clouds,
 )
 from ..results import MonteCarloResult
+from ..tables import ExperimentOutput, Table
 from ..rng import run_streams
-from .experiments import build_filters, build_scenario, check_run_exists, resolve_paper, resolve_section, run_index
+from ..config.build import build_filters, build_scenario, resolve_paper, resolve_section
+from .montecarlo import check_run_exists, run_index
 
 __all__ = ["SweepPlan", "run_metric", "paired_difference"]
 
