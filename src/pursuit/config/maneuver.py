@@ -19,8 +19,8 @@ from ..filters.cs import (
 from ..filters.gaussian import KalmanFilter
 from ..filters.imm import InteractingMultipleModel
 from ..models import maneuver as mm
-from ..registry import Param, register
-from ..scenarios.maneuver import DEFAULT_SCHEDULE, ManeuveringTarget, parse_schedule
+from ..registry import Param, field_param, field_default, params_from, register
+from ..scenarios.maneuver import ManeuveringTarget, parse_schedule
 from .build import build_filter
 from .filters import GATE, NAME
 
@@ -54,7 +54,10 @@ def _schedule(field: str, value: Any):
     return parse_schedule(value, field)
 
 
-_DEFAULT_TABLES = [{"axis": m.axis, "start": m.start, "stop": m.stop, "accel": m.accel} for m in DEFAULT_SCHEDULE]
+# the class's default schedule, as the TOML tables that spell it (what `pursuit list -v` shows)
+_DEFAULT_TABLES = [
+    {"axis": m.axis, "start": m.start, "stop": m.stop, "accel": m.accel} for m in field_default(ManeuveringTarget, "maneuvers")
+]
 
 
 @register(
@@ -62,11 +65,18 @@ _DEFAULT_TABLES = [{"axis": m.axis, "start": m.start, "stop": m.stop, "accel": m
     "maneuver-3d",
     "Target maneuvering on a schedule of accelerations and turns in up to 3 axes, position measured per axis; state [x, vx, ax, ...]",
     params=(
-        Param("horizon", "int", 100, "measurement epochs including the two for initialisation (filter steps = horizon - 2)"),
-        Param("dt", "float", 1.0, "sampling period, s"),
-        Param("position", "vector", [200e3, 200e3, 200e3], "initial position per axis, m (1 to 3 axes)"),
-        Param("velocity", "vector", [0.0, 400.0, 10.0], "initial velocity per axis, m/s"),
-        Param("R", "float", 20.0, "measurement noise variance per axis, m^2"),
+        *params_from(
+            ManeuveringTarget,
+            ["horizon", "dt", "position", "velocity", "R"],
+            types={"position": "vector", "velocity": "vector"},
+            docs={
+                "horizon": "measurement epochs including the two for initialisation (filter steps = horizon - 2)",
+                "dt": "sampling period, s",
+                "position": "initial position per axis, m (1 to 3 axes)",
+                "velocity": "initial velocity per axis, m/s",
+                "R": "measurement noise variance per axis, m^2",
+            },
+        ),
         Param(
             "maneuvers",
             "any",
@@ -74,9 +84,17 @@ _DEFAULT_TABLES = [{"axis": m.axis, "start": m.start, "stop": m.stop, "accel": m
             "[[scenario.maneuvers]] tables: {axis, start, stop, accel} or {plane, start, stop, rate (deg/s)}; default: a schedule of accelerations on all three axes (see docs/maneuvering.md)",
             check=_schedule,
         ),
-        Param("init", "str", "two-point", "prior: two-point differencing or sampled from N(truth, P0)", choices=("two-point", "sampled")),
-        Param("init_accel_std", "float", 100.0 / 3.0, "prior standard deviation of the acceleration, m/s^2"),
+        *params_from(
+            ManeuveringTarget,
+            ["init", "init_accel_std"],
+            choices={"init": ("two-point", "sampled")},
+            docs={
+                "init": "prior: two-point differencing or sampled from N(truth, P0)",
+                "init_accel_std": "prior standard deviation of the acceleration, m/s^2",
+            },
+        ),
     ),
+    target=ManeuveringTarget,
 )
 def _maneuver_scenario(where: str = "scenario", **kw) -> ManeuveringTarget:
     try:
@@ -95,21 +113,31 @@ def _axes_of(scenario: Any, where: str) -> int:
     return H.shape[0]
 
 
-_CS_PARAMS = (
-    NAME,
-    Param("alpha", "float", 0.001, "maneuver frequency alpha, 1/s (paper: 0.001)"),
-    Param("a_max", "float", 100.0, "acceleration limit, m/s^2 (paper: 100)"),
-    Param("a_neg_max", "float", None, "negative acceleration limit (magnitude); default a_max"),
-    Param("sigma_min", "float", 0.0, "floor on sigma_a, m/s^2"),
-    Param("mean", "str", "current", "current: a_bar = a(k|k) (CS); zero: Singer prediction", choices=("current", "zero")),
-    GATE,
+@register(
+    "filter",
+    "cs",
+    "Standard current-statistical (CS) model Kalman filter, per axis",
+    params=(
+        NAME,
+        *params_from(
+            CurrentStatisticalFilter,
+            ["alpha", "a_max", "a_neg_max", "sigma_min", "mean"],
+            choices={"mean": ("current", "zero")},
+            docs={
+                "alpha": "maneuver frequency alpha, 1/s (paper: 0.001)",
+                "a_max": "acceleration limit, m/s^2 (paper: 100)",
+                "a_neg_max": "negative acceleration limit (magnitude); default a_max",
+                "sigma_min": "floor on sigma_a, m/s^2",
+                "mean": "current: a_bar = a(k|k) (CS); zero: Singer prediction",
+            },
+        ),
+        GATE,
+    ),
+    target=CurrentStatisticalFilter,
 )
-
-
-@register("filter", "cs", "Standard current-statistical (CS) model Kalman filter, per axis", params=_CS_PARAMS)
-def _cs(scenario, where="filter", name=None, **kw):
+def _cs(scenario, where="filter", **kw):
     _axes_of(scenario, where)
-    return _reanchor(where, lambda: CurrentStatisticalFilter(scenario.measurement, dt=scenario.dt, name=name or "", **kw))
+    return _reanchor(where, lambda: CurrentStatisticalFilter(scenario.measurement, dt=scenario.dt, **kw))
 
 
 @register(
@@ -118,27 +146,40 @@ def _cs(scenario, where="filter", name=None, **kw):
     "Parameter-adaptive current-statistical filter (Fang & Yang, \"Maneuvering target tracking algorithm based on parameter-adaptive CS model\"): displacement-based variance, chi-square maneuver detection, fading and alpha",
     params=(
         NAME,
-        Param("alpha0", "float", 0.001, "maneuver frequency without maneuver, 1/s"),
-        Param("a_max", "float", 100.0, "initial acceleration limit, m/s^2"),
-        Param("threshold", "float", 3.0, "detection threshold M on D (paper: 3)"),
-        Param("false_alarm", "float", None, "alternatively the false-alarm probability p (M from chi-square, 1 dof)"),
-        Param("variance", "str", "displacement", "sigma_a^2 law", choices=("displacement", "linear", "rayleigh", "fixed")),
-        Param("c_a", "float", 1.0, "slope of the linear law, m/s^2"),
-        Param("sigma_a", "float", 1.0, "sigma_a of the fixed law, m/s^2"),
-        Param("sigma_min", "float", 0.1, "floor on sigma_a, m/s^2"),
-        Param("sigma_max", "float", None, "ceiling on sigma_a, m/s^2 (default none)"),
-        Param("fading", "str", "stf", "fading coefficient on detection", choices=("stf", "ratio", "none")),
-        Param("rho", "float", 0.95, "STF forgetting factor"),
-        Param("beta_s", "float", 1.0, "STF weakening factor (>= 1)"),
-        Param("alpha_rule", "str", "ratio", "alpha on detection: alpha0*D/M, lambda*alpha0 or unchanged", choices=("ratio", "fading", "none")),
-        Param("alpha_cap", "float", 1.0, "upper limit of alpha, 1/s"),
-        Param("mean", "str", "current", "current (CS) or zero (Singer prediction)", choices=("current", "zero")),
+        *params_from(
+            AdaptiveCSFilter,
+            ["alpha0", "a_max", "threshold", "false_alarm", "variance", "c_a", "sigma_a", "sigma_min", "sigma_max", "fading", "rho", "beta_s", "alpha_rule", "alpha_cap", "mean"],
+            choices={
+                "variance": ("displacement", "linear", "rayleigh", "fixed"),
+                "fading": ("stf", "ratio", "none"),
+                "alpha_rule": ("ratio", "fading", "none"),
+                "mean": ("current", "zero"),
+            },
+            docs={
+                "alpha0": "maneuver frequency without maneuver, 1/s",
+                "a_max": "initial acceleration limit, m/s^2",
+                "threshold": "detection threshold M on D (paper: 3)",
+                "false_alarm": "alternatively the false-alarm probability p (M from chi-square, 1 dof)",
+                "variance": "sigma_a^2 law",
+                "c_a": "slope of the linear law, m/s^2",
+                "sigma_a": "sigma_a of the fixed law, m/s^2",
+                "sigma_min": "floor on sigma_a, m/s^2",
+                "sigma_max": "ceiling on sigma_a, m/s^2 (default none)",
+                "fading": "fading coefficient on detection",
+                "rho": "STF forgetting factor",
+                "beta_s": "STF weakening factor (>= 1)",
+                "alpha_rule": "alpha on detection: alpha0*D/M, lambda*alpha0 or unchanged",
+                "alpha_cap": "upper limit of alpha, 1/s",
+                "mean": "current (CS) or zero (Singer prediction)",
+            },
+        ),
         GATE,
     ),
+    target=AdaptiveCSFilter,
 )
-def _apcs(scenario, where="filter", name=None, **kw):
+def _apcs(scenario, where="filter", **kw):
     _axes_of(scenario, where)
-    return _reanchor(where, lambda: AdaptiveCSFilter(scenario.measurement, dt=scenario.dt, name=name or "", **kw))
+    return _reanchor(where, lambda: AdaptiveCSFilter(scenario.measurement, dt=scenario.dt, **kw))
 
 
 @register(
@@ -147,18 +188,25 @@ def _apcs(scenario, where="filter", name=None, **kw):
     "Modified Singer filter: alpha and sigma estimated online from the acceleration autocorrelation",
     params=(
         NAME,
-        Param("alpha_init", "float", 0.05, "alpha during the warm-up, 1/s"),
-        Param("sigma_init", "float", 10.0, "sigma_m during the warm-up, m/s^2"),
-        Param("warmup", "int", 5, "measured steps before the estimates are used"),
-        Param("tau_min", "float", 1.0, "shortest maneuver time constant, s"),
-        Param("sigma_min", "float", 0.1, "floor on sigma_m, m/s^2"),
-        Param("forgetting", "float", None, "forgetting factor of the running averages (default: 1/k averaging)"),
+        *params_from(
+            ModifiedSingerFilter,
+            ["alpha_init", "sigma_init", "warmup", "tau_min", "sigma_min", "forgetting"],
+            docs={
+                "alpha_init": "alpha during the warm-up, 1/s",
+                "sigma_init": "sigma_m during the warm-up, m/s^2",
+                "warmup": "measured steps before the estimates are used",
+                "tau_min": "shortest maneuver time constant, s",
+                "sigma_min": "floor on sigma_m, m/s^2",
+                "forgetting": "forgetting factor of the running averages (default: 1/k averaging)",
+            },
+        ),
         GATE,
     ),
+    target=ModifiedSingerFilter,
 )
-def _ms(scenario, where="filter", name=None, **kw):
+def _ms(scenario, where="filter", **kw):
     _axes_of(scenario, where)
-    return _reanchor(where, lambda: ModifiedSingerFilter(scenario.measurement, dt=scenario.dt, name=name or "", **kw))
+    return _reanchor(where, lambda: ModifiedSingerFilter(scenario.measurement, dt=scenario.dt, **kw))
 
 
 def _singer_sigma(where: str, sigma, a_max, p_max, p_zero) -> float:
@@ -170,24 +218,29 @@ def _singer_sigma(where: str, sigma, a_max, p_max, p_zero) -> float:
         raise ValueError(f"{where}.{e}") from None
 
 
+# sigma and Singer's rule are the builder's: the model needs sigma, the rule gives it from a_max, p_max, p_zero
 _SINGER_PARAMS = (
-    Param("alpha", "float", 0.05, "maneuver frequency 1/tau, 1/s"),
-    Param("sigma", "float", None, "acceleration standard deviation, m/s^2 (default: Singer's rule from a_max, p_max, p_zero)"),
-    Param("a_max", "float", 100.0, "Singer's rule: largest acceleration, m/s^2"),
-    Param("p_max", "float", 0.1, "Singer's rule: probability of +-a_max"),
-    Param("p_zero", "float", 0.5, "Singer's rule: probability of no acceleration"),
+    field_param(mm.Singer, "alpha", doc="maneuver frequency 1/tau, 1/s"),
+    Param("sigma", "float", None, "acceleration standard deviation, m/s^2 (default: Singer's rule from a_max, p_max, p_zero)", own=True),
+    Param("a_max", "float", 100.0, "Singer's rule: largest acceleration, m/s^2", own=True),
+    Param("p_max", "float", 0.1, "Singer's rule: probability of +-a_max", own=True),
+    Param("p_zero", "float", 0.5, "Singer's rule: probability of no acceleration", own=True),
 )
 
 
-@register("filter", "singer", "Kalman filter with the Singer model on every axis", params=(NAME, *_SINGER_PARAMS, GATE))
-def _singer(scenario, where="filter", name=None, alpha=0.05, sigma=None, a_max=100.0, p_max=0.1, p_zero=0.5, gate=None):
+@register(
+    "filter",
+    "singer",
+    "Kalman filter with the Singer model on every axis",
+    params=(Param("name", "str", "Singer", NAME.doc, own=True), *_SINGER_PARAMS, GATE),
+    target=KalmanFilter,
+)
+def _singer(scenario, where="filter", *, name: str, alpha: float, sigma: float | None, a_max: float, p_max: float, p_zero: float, gate):
     axes = _axes_of(scenario, where)
     s = _singer_sigma(where, sigma, a_max, p_max, p_zero)
     return _reanchor(
         where,
-        lambda: KalmanFilter(
-            mm.Singer(alpha=alpha, sigma=s, ndim=axes, dt=scenario.dt), scenario.measurement, name=name or "Singer", gate=gate
-        ),
+        lambda: KalmanFilter(mm.Singer(alpha=alpha, sigma=s, ndim=axes, dt=scenario.dt), scenario.measurement, name=name, gate=gate),
     )
 
 
@@ -206,19 +259,25 @@ def _transition(field: str, value: Any):
     return value
 
 
+_IMM_PARAMS = (
+    field_param(InteractingMultipleModel, "transition", doc="staying probability p_ii, or the full Markov matrix", check=_transition),
+    field_param(InteractingMultipleModel, "initial_probs", type="vector", doc="initial mode probabilities (default uniform)"),
+    IMM_GATE,
+)
+
+
 @register(
     "filter",
     "imm-singer",
     "IMM over Singer-model Kalman filters with different (alpha, sigma) (Tan et al.)",
     params=(
-        NAME,
-        Param("models", "matrix", [[1 / 60, 5.0], [1 / 20, 20.0], [1 / 5, 60.0]], "one [alpha (1/s), sigma (m/s^2)] row per model"),
-        Param("transition", "any", 0.95, "staying probability p_ii, or the full Markov matrix", check=_transition),
-        Param("initial_probs", "vector", None, "initial mode probabilities (default uniform)"),
-        IMM_GATE,
+        Param("name", "str", "IMM-Singer", NAME.doc, own=True),
+        Param("models", "matrix", [[1 / 60, 5.0], [1 / 20, 20.0], [1 / 5, 60.0]], "one [alpha (1/s), sigma (m/s^2)] row per model", own=True),
+        *_IMM_PARAMS,
     ),
+    target=InteractingMultipleModel,
 )
-def _imm_singer(scenario, where="filter", name=None, models=None, transition=0.95, initial_probs=None, gate=None):
+def _imm_singer(scenario, where="filter", *, name: str, models, transition, initial_probs, gate):
     axes = _axes_of(scenario, where)
     rows = np.atleast_2d(np.asarray(models, dtype=float))
     if rows.ndim != 2 or rows.shape[1] != 2:
@@ -229,7 +288,7 @@ def _imm_singer(scenario, where="filter", name=None, models=None, transition=0.9
         # the mode's name in legends: the time constant reads better than α = 0.0166667 (1/s)
         label = f"Singer τ = {1 / a:.3g} s, σ = {s:.3g} m/s²" if a > 0 else f"Singer α = 0, σ = {s:.3g} m/s²"
         filters.append(KalmanFilter(model, scenario.measurement, name=label))
-    return _reanchor(where, lambda: InteractingMultipleModel(filters, transition, initial_probs, name=name or "IMM-Singer", gate=gate))
+    return _reanchor(where, lambda: InteractingMultipleModel(filters, transition, initial_probs, name=name, gate=gate))
 
 
 @register(
@@ -237,15 +296,14 @@ def _imm_singer(scenario, where="filter", name=None, models=None, transition=0.9
     "imm",
     "IMM over any filters built for the scenario (each [[...models]] entry is a filter table)",
     params=(
-        NAME,
-        Param("models", "any", registry.REQUIRED, "list of filter tables {type = ..., ...}"),
-        Param("transition", "any", 0.95, "staying probability p_ii, or the full Markov matrix", check=_transition),
-        Param("initial_probs", "vector", None, "initial mode probabilities (default uniform)"),
-        IMM_GATE,
+        field_param(InteractingMultipleModel, "name", doc=NAME.doc),
+        Param("models", "any", registry.REQUIRED, "list of filter tables {type = ..., ...}", own=True),
+        *_IMM_PARAMS,
     ),
+    target=InteractingMultipleModel,
 )
-def _imm(scenario, where="filter", name=None, models=None, transition=0.95, initial_probs=None, gate=None):
+def _imm(scenario, where="filter", *, name: str, models, transition, initial_probs, gate):
     if not isinstance(models, list) or not models or not all(isinstance(m, dict) for m in models):
         raise ValueError(f"{where}.models: expected a list of filter tables")
     filters = [build_filter(entry, scenario, f"{where}.models[{i}]") for i, entry in enumerate(models)]
-    return _reanchor(where, lambda: InteractingMultipleModel(filters, transition, initial_probs, name=name or "IMM", gate=gate))
+    return _reanchor(where, lambda: InteractingMultipleModel(filters, transition, initial_probs, name=name, gate=gate))
