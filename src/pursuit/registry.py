@@ -21,7 +21,7 @@ import inspect
 import math
 import pkgutil
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence, Type  # Type: `type` would be ambiguous with Param.type in the API docs
 
 if TYPE_CHECKING:
     import numpy as np
@@ -80,7 +80,7 @@ class Param:
     doc: str = ""
     check: Callable[[str, Any], Any] | None = None
     choices: tuple[Any, ...] | None = None
-    source: tuple[type, str] | None = None
+    source: tuple[Type[Any], str] | None = None
     own: bool = False
 
     def convert(self, field_name: str, value: Any) -> Any:
@@ -110,7 +110,7 @@ class Component:
     params: tuple[Param, ...]
     build: Callable[..., Any]
     aliases: tuple[str, ...] = field(default_factory=tuple)
-    target: type | None = None
+    target: Type[Any] | None = None
 
     def param(self, name: str) -> Param | None:
         """The parameter called ``name``, if any."""
@@ -151,7 +151,7 @@ def register(
     summary: str,
     params: Sequence[Param] = (),
     aliases: Sequence[str] = (),
-    target: type | None = None,
+    target: Type[Any] | None = None,
 ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Decorator registering ``build`` as component ``name`` of ``kind``.
 
@@ -247,7 +247,7 @@ def catalog_source() -> str:
 # parameters derived from dataclass fields: a default is written once, in the class
 # --------------------------------------------------------------------------
 def field_param(
-    cls: type,
+    cls: Type[Any],
     path: str,
     *,
     name: str | None = None,
@@ -303,7 +303,7 @@ def field_param(
 
 
 def params_from(
-    cls: type,
+    cls: Type[Any],
     fields: Sequence[str] | None = None,
     *,
     exclude: Sequence[str] = (),
@@ -333,17 +333,17 @@ def params_from(
     return tuple(out)
 
 
-def field_default(cls: type, path: str) -> Any:
+def field_default(cls: Type[Any], path: str) -> Any:
     """The default of a field path of a dataclass (:data:`REQUIRED` when it has none)."""
     return _resolve_field(cls, path)[2]
 
 
-def field_annotation(cls: type, path: str) -> Any:
+def field_annotation(cls: Type[Any], path: str) -> Any:
     """The annotation of a field path of a dataclass (a string under ``from __future__ import annotations``)."""
     return _resolve_field(cls, path)[1].type
 
 
-def _resolve_field(cls: type, path: str) -> tuple[type, dataclasses.Field, Any]:
+def _resolve_field(cls: Type[Any], path: str) -> tuple[Type[Any], dataclasses.Field, Any]:
     """``(class declaring the last field, that field, its default)`` for a dotted field path."""
     owner: Any = cls
     holder: Any = None  # the default instance the current part is read from (after the first part)
@@ -411,7 +411,7 @@ def _split_union(text: str) -> list[str]:
     return [*parts, cur]
 
 
-def _docstring_entries(cls: type) -> dict[str, str]:
+def _docstring_entries(cls: Type[Any]) -> dict[str, str]:
     """First sentence of each entry of the numpy docstring's Parameters / Attributes sections."""
     lines = (inspect.getdoc(cls) or "").splitlines()
     out: dict[str, str] = {}
