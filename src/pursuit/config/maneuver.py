@@ -19,7 +19,7 @@ from ..filters.cs import (
 from ..filters.gaussian import KalmanFilter
 from ..filters.imm import InteractingMultipleModel
 from ..models import maneuver as mm
-from ..registry import Param, field_param, field_default, params_from, register
+from ..registry import Param, field_default, field_param, params_from, register
 from ..scenarios.maneuver import ManeuveringTarget, parse_schedule
 from .build import build_filter
 from .filters import GATE, NAME

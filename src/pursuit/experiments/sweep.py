@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from .. import metrics, registry
+from ..config.build import build_filters, build_scenario, resolve_paper, resolve_section
 from ..engine.montecarlo import FILTER_STREAM, SCENARIO_STREAM, monte_carlo
 from ..engine.snapshots import particle_snapshots
 from ..registry import Param, register
@@ -46,9 +47,8 @@ from ..report.sweep_figures import (
     particle_clouds,
 )
 from ..results import MonteCarloResult
-from ..tables import ExperimentOutput, Table
 from ..rng import run_streams
-from ..config.build import build_filters, build_scenario, resolve_paper, resolve_section
+from ..tables import ExperimentOutput, Table
 from .montecarlo import check_run_exists, run_index
 
 __all__ = ["SweepPlan", "run_metric", "paired_difference"]
