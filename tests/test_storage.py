@@ -247,4 +247,4 @@ def test_every_csv_is_written_by_the_one_writer(tmp_path):
     # floats as their shortest round-tripping text whatever their type, None as empty, the rest as is
     n = write_csv(tmp_path / "t.csv", ["a", "b", "c"], iter([[0.1, np.float64(1 / 3), None], [1, "x,y", True]]))
     assert n == 2
-    assert (tmp_path / "t.csv").read_text() == 'a,b,c\r\n0.1,0.3333333333333333,\r\n1,"x,y",True\r\n'
+    assert (tmp_path / "t.csv").read_bytes().decode() == 'a,b,c\r\n0.1,0.3333333333333333,\r\n1,"x,y",True\r\n'
