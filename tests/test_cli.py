@@ -138,7 +138,7 @@ def test_trajectory_run_is_kept_whole_in_summary_mode(tmp_path):
 def test_impossible_sweep_run_is_refused_at_load(tmp_path):
     from pursuit.experiment import ConfigError, load_experiment
 
-    from .components.test_sweep import SMALL
+    from .experiments.test_sweep import SMALL
 
     p = tmp_path / "sweep.toml"
     p.write_text(SMALL.replace("[figures]\n", "[figures]\nrun = 6\n"))

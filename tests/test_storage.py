@@ -10,9 +10,9 @@ import pytest
 
 import pursuit
 from pursuit.engine import monte_carlo
-from pursuit.experiment import ExperimentOutput, Table
 from pursuit.report.output import write_output
 from pursuit.storage import load_result, save_result, write_errors_csv, write_per_step_csv
+from pursuit.tables import ExperimentOutput, Table
 
 from .engine.helpers import SMALL, assert_same_result, small_filters
 
@@ -85,7 +85,7 @@ def test_per_step_csv_equals_the_summaries(full, summary, tmp_path):
 
 
 def _output(result) -> ExperimentOutput:
-    from pursuit.components.experiments import standard_figures, summary_table
+    from pursuit.experiments.montecarlo import standard_figures, summary_table
 
     return ExperimentOutput(
         "demo", "Demo", "A demo.", [summary_table(result)], standard_figures(result, SMALL, {}), results={"result": result}
@@ -148,8 +148,8 @@ def test_paper_tables_keep_their_kind(full, tmp_path):
 
 _KILLED_WRITER = r"""
 import os, sys, time
-from pursuit.experiment import ExperimentOutput, Table
 from pursuit.report.output import write_output
+from pursuit.tables import ExperimentOutput, Table
 
 class Blocks:
     def savefig(self, path, **kw):
@@ -231,3 +231,20 @@ def test_output_is_light_by_default_and_full_one_option_away(full, tmp_path):
     assert size(light) < 0.6 * size(heavy)
     assert "light" in pursuit.load(light).sidecar["data"] and pursuit.load(heavy).sidecar["data"] == "full"
     assert "saved data" in (light / "report.html").read_text()
+
+
+def test_every_csv_is_written_by_the_one_writer(tmp_path):
+    import re
+
+    import pursuit
+    from pursuit.tables import write_csv
+
+    src = Path(pursuit.__file__).parent
+    writers = sorted(
+        p.relative_to(src).as_posix() for p in src.rglob("*.py") if re.search(r"csv\.(writer|DictWriter)\(", p.read_text(encoding="utf-8"))
+    )
+    assert writers == ["tables.py"]
+    # floats as their shortest round-tripping text whatever their type, None as empty, the rest as is
+    n = write_csv(tmp_path / "t.csv", ["a", "b", "c"], iter([[0.1, np.float64(1 / 3), None], [1, "x,y", True]]))
+    assert n == 2
+    assert (tmp_path / "t.csv").read_bytes().decode() == 'a,b,c\r\n0.1,0.3333333333333333,\r\n1,"x,y",True\r\n'

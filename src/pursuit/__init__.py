@@ -88,7 +88,7 @@ def __dir__() -> list[str]:
 __version__ = "0.1.0.dev0"
 
 if TYPE_CHECKING:
-    from .experiment import ExperimentOutput
+    from .tables import ExperimentOutput
 
 
 def load(folder: str | os.PathLike[str]) -> ExperimentOutput:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 import re
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -23,11 +23,10 @@ from .registry import Param
 
 if TYPE_CHECKING:
     from .engine.memory import MemoryNeeded
+    from .tables import ExperimentOutput
 
 __all__ = [
     "ConfigError",
-    "Table",
-    "ExperimentOutput",
     "Experiment",
     "load_experiment",
     "experiments_dir",
@@ -48,55 +47,6 @@ class ConfigError(ValueError):
         self.message = message
         where = f"{self.path}:{line}" if line else self.path
         super().__init__(f"{where}: {message}")
-
-
-@dataclass
-class Table:
-    """A result table: printed on the terminal, written as CSV, shown in reports.
-
-    Attributes
-    ----------
-    name
-        File stem for the CSV (``summary`` -> ``summary.csv``).
-    title
-        One line shown above the table.
-    columns, rows
-        Header and rows (numbers stay numbers; formatting is the writer's job).
-    notes
-        Free text shown under the table (caveats, definitions).
-    kind
-        ``"result"`` for our measurements, ``"paper"`` for a table that
-        puts a paper's numbers beside ours (its columns then say which is
-        which, e.g. ``paper`` and ``measured``).
-    """
-
-    name: str
-    title: str
-    columns: list[str]
-    rows: list[list[Any]]
-    notes: str = ""
-    kind: str = "result"
-
-
-@dataclass
-class ExperimentOutput:
-    """What running an experiment produces: tables, figures and result objects."""
-
-    name: str
-    title: str
-    description: str
-    tables: list[Table]
-    figures: dict[str, Any]
-    results: dict[str, Any] = field(default_factory=dict)
-    sidecar: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def result(self) -> Any:
-        """The only result object (``results`` with one entry); an error naming them otherwise."""
-        if len(self.results) != 1:
-            names = ", ".join(map(str, self.results)) or "none"
-            raise ValueError(f"{self.name}: {len(self.results)} results ({names}); pick one from .results")
-        return next(iter(self.results.values()))
 
 
 @dataclass

@@ -6,38 +6,32 @@ type, its default and a check, so the config loader can refuse an unknown
 key, a wrong type or an impossible value with one line naming the field,
 before anything runs or is written.
 
-Modules register their own components with :func:`register`; the modules
-listed in ``_COMPONENT_MODULES`` are imported on first use.
+Modules register their own components with :func:`register`.  Every module
+of the packages in :data:`REGISTERING_PACKAGES` (:mod:`pursuit.config`, the
+registrations, and :mod:`pursuit.experiments`, the experiment kinds) is
+imported on first use, so a new module there registers without a line here.
 """
 
 from __future__ import annotations
 
+import ast
+import dataclasses
 import importlib
+import inspect
 import math
+import pkgutil
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence, Type  # Type: `type` would be ambiguous with Param.type in the API docs
 
 if TYPE_CHECKING:
     import numpy as np
 
-__all__ = ["Param", "Component", "register", "get", "components", "REQUIRED", "KINDS"]
+__all__ = ["Param", "Component", "register", "get", "components", "REQUIRED", "KINDS", "REGISTERING_PACKAGES", "field_param", "params_from", "field_default", "field_annotation", "toml_type"]
 
 KINDS = ("scenario", "filter", "fading", "experiment", "model")
 
-# Modules whose import registers components.  Add a line when you add one.
-_COMPONENT_MODULES = (
-    "pursuit.components.models",
-    "pursuit.components.scenarios",
-    "pursuit.components.filters",
-    "pursuit.components.fading",
-    "pursuit.components.experiments",
-    "pursuit.components.maneuver",
-    "pursuit.components.maneuver_experiment",
-    "pursuit.components.underwater",
-    "pursuit.components.conditions",
-    "pursuit.components.particle",
-    "pursuit.components.sweep",
-)
+REGISTERING_PACKAGES = ("pursuit.config", "pursuit.experiments")
+"""Packages whose every module is imported (and so registers its components) on first look-up."""
 
 
 class _Required:
@@ -68,6 +62,16 @@ class Param:
         ``ValueError`` naming the field when the value is impossible.
     choices
         Allowed values for a ``"str"`` parameter.
+    source
+        ``(cls, "field")`` or ``(cls, "field.subfield")``: the dataclass
+        field this parameter sets, whose default, type and choices it was
+        derived from (:func:`field_param`, :func:`params_from`).
+        ``tests/test_registry.py`` checks them against the class.
+    own
+        True for an option of the builder itself, not a field of the
+        component's class (``resample`` of the ``pf`` filter, say); a
+        parameter that is neither derived nor ``own`` must be a field of
+        the component's :attr:`Component.target` with the same default.
     """
 
     name: str
@@ -76,6 +80,8 @@ class Param:
     doc: str = ""
     check: Callable[[str, Any], Any] | None = None
     choices: tuple[Any, ...] | None = None
+    source: tuple[Type[Any], str] | None = None
+    own: bool = False
 
     def convert(self, field_name: str, value: Any) -> Any:
         """Type-check and convert a TOML value; raises ``ValueError``."""
@@ -94,6 +100,8 @@ class Component:
 
     ``build(**params, **context)`` makes the object; ``context`` holds what
     the kind needs beyond the TOML values (a filter gets the scenario).
+    ``target`` is the class it builds (``build`` itself when that is a
+    class): the class its parameters are checked against.
     """
 
     kind: str
@@ -102,6 +110,7 @@ class Component:
     params: tuple[Param, ...]
     build: Callable[..., Any]
     aliases: tuple[str, ...] = field(default_factory=tuple)
+    target: Type[Any] | None = None
 
     def param(self, name: str) -> Param | None:
         """The parameter called ``name``, if any."""
@@ -137,14 +146,24 @@ _loaded = False
 
 
 def register(
-    kind: str, name: str, summary: str, params: Sequence[Param] = (), aliases: Sequence[str] = ()
+    kind: str,
+    name: str,
+    summary: str,
+    params: Sequence[Param] = (),
+    aliases: Sequence[str] = (),
+    target: Type[Any] | None = None,
 ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """Decorator registering ``build`` as component ``name`` of ``kind``."""
+    """Decorator registering ``build`` as component ``name`` of ``kind``.
+
+    ``target`` names the class that ``build`` makes when ``build`` is a
+    function (a class registered directly is its own target).
+    """
     if kind not in KINDS:
         raise ValueError(f"unknown component kind {kind!r}")
 
     def deco(build: Callable[..., Any]) -> Callable[..., Any]:
-        comp = Component(kind, name, summary, tuple(params), build, tuple(aliases))
+        cls = target if target is not None else (build if isinstance(build, type) else None)
+        comp = Component(kind, name, summary, tuple(params), build, tuple(aliases), cls)
         table = _REGISTRY[kind]
         for key in (name, *aliases):
             if key in table and table[key].build is not build:
@@ -159,8 +178,15 @@ def _load() -> None:
     global _loaded
     if not _loaded:
         _loaded = True
-        for mod in _COMPONENT_MODULES:
-            importlib.import_module(mod)
+        for package in REGISTERING_PACKAGES:
+            for mod in _modules(package):
+                importlib.import_module(mod)
+
+
+def _modules(package: str) -> list[str]:
+    """The modules of ``package``, sorted by name (the import order does not matter: names are unique)."""
+    pkg = importlib.import_module(package)
+    return sorted(f"{package}.{info.name}" for info in pkgutil.iter_modules(pkg.__path__) if not info.ispkg)
 
 
 def get(kind: str, name: str, where: str = "") -> Component:
@@ -215,6 +241,207 @@ def catalog_source() -> str:
         lines.append("    ],")
     lines.append("}")
     return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------
+# parameters derived from dataclass fields: a default is written once, in the class
+# --------------------------------------------------------------------------
+def field_param(
+    cls: Type[Any],
+    path: str,
+    *,
+    name: str | None = None,
+    doc: str | None = None,
+    type: str | None = None,
+    choices: Sequence[Any] | None = None,
+    check: Callable[[str, Any], Any] | None = None,
+) -> Param:
+    """A :class:`Param` whose default, type, choices and doc come from a dataclass field.
+
+    Parameters
+    ----------
+    cls
+        The dataclass.
+    path
+        The field, or ``"field.subfield"`` for a field of the dataclass
+        held in a field's default (``"search.alpha_max"`` of
+        :class:`~pursuit.filters.cuckoo.ICSPF` is ``alpha_max`` of its
+        default :class:`~pursuit.filters.cuckoo.CuckooSearch`).
+    name
+        The TOML key (default: the last part of ``path``).
+    doc
+        The line for ``pursuit list``; default: ``metadata["doc"]`` of the
+        field, else the field's entry in the numpy docstring's Parameters or
+        Attributes section of the class that declares it.
+    type
+        The TOML type when the annotation does not tell (``"matrix"`` for an
+        array); default from the annotation (``float | None`` is
+        ``"float"``, a ``Literal`` is ``"str"`` with its choices).
+    choices, check
+        As in :class:`Param`; ``choices`` default to ``metadata["choices"]``
+        or the ``Literal``'s values.
+    """
+    owner, fld, default = _resolve_field(cls, path)
+    derived_type, derived_choices = toml_type(fld.type)
+    if hasattr(default, "tolist"):  # an array default reads (and prints) as the TOML list it stands for
+        default = default.tolist()
+    elif isinstance(default, tuple) and (type or derived_type) in ("vector", "matrix"):
+        default = list(default)
+    if choices is None:
+        choices = fld.metadata.get("choices", derived_choices)
+    if doc is None:
+        doc = fld.metadata.get("doc") or _docstring_entries(owner).get(fld.name, "")
+    return Param(
+        name or fld.name,
+        type or derived_type,
+        default,
+        doc,
+        check,
+        tuple(choices) if choices is not None else None,
+        source=(cls, path),
+    )
+
+
+def params_from(
+    cls: Type[Any],
+    fields: Sequence[str] | None = None,
+    *,
+    exclude: Sequence[str] = (),
+    rename: dict[str, str] | None = None,
+    docs: dict[str, str] | None = None,
+    types: dict[str, str] | None = None,
+    choices: dict[str, Sequence[Any]] | None = None,
+    checks: dict[str, Callable[[str, Any], Any]] | None = None,
+) -> tuple[Param, ...]:
+    """:func:`field_param` for several fields of ``cls``, in order.
+
+    ``fields`` are field paths (default: every ``init`` field of ``cls`` in
+    declaration order, less ``exclude``); ``rename`` maps a path to its TOML
+    key; ``docs``, ``types``, ``choices`` and ``checks`` are keyed by TOML key.
+    """
+    rename, docs, types, choices, checks = rename or {}, docs or {}, types or {}, choices or {}, checks or {}
+    if fields is None:
+        fields = [f.name for f in dataclasses.fields(cls) if f.init]
+    out = []
+    for path in fields:
+        if path in exclude:
+            continue
+        key = rename.get(path, path.rsplit(".", 1)[-1])
+        out.append(
+            field_param(cls, path, name=key, doc=docs.get(key), type=types.get(key), choices=choices.get(key), check=checks.get(key))
+        )
+    return tuple(out)
+
+
+def field_default(cls: Type[Any], path: str) -> Any:
+    """The default of a field path of a dataclass (:data:`REQUIRED` when it has none)."""
+    return _resolve_field(cls, path)[2]
+
+
+def field_annotation(cls: Type[Any], path: str) -> Any:
+    """The annotation of a field path of a dataclass (a string under ``from __future__ import annotations``)."""
+    return _resolve_field(cls, path)[1].type
+
+
+def _resolve_field(cls: Type[Any], path: str) -> tuple[Type[Any], dataclasses.Field, Any]:
+    """``(class declaring the last field, that field, its default)`` for a dotted field path."""
+    owner: Any = cls
+    holder: Any = None  # the default instance the current part is read from (after the first part)
+    parts = path.split(".")
+    for i, part in enumerate(parts):
+        if not dataclasses.is_dataclass(owner):
+            raise TypeError(f"{cls.__name__}.{'.'.join(parts[:i])} is not a dataclass")
+        by_name = {f.name: f for f in dataclasses.fields(owner)}
+        if part not in by_name or not by_name[part].init:
+            raise TypeError(f"{cls.__name__} has no init field {'.'.join(parts[: i + 1])!r}")
+        fld = by_name[part]
+        if holder is not None:  # a field of the parent's default instance: its value is this path's default
+            default = getattr(holder, part)
+        elif fld.default is not dataclasses.MISSING:
+            default = fld.default
+        elif fld.default_factory is not dataclasses.MISSING:
+            default = fld.default_factory()
+        else:
+            default = REQUIRED
+        declaring = next((c for c in owner.__mro__ if part in c.__dict__.get("__annotations__", {})), owner)
+        if i < len(parts) - 1:
+            if default is REQUIRED or default is None:
+                raise TypeError(f"{cls.__name__}.{'.'.join(parts[: i + 1])} has no default to read {path!r} from")
+            owner, holder = type(default), default
+    return declaring, fld, default
+
+
+_SIMPLE = {"int": "int", "float": "float", "bool": "bool", "str": "str", "dict": "table"}
+_ARRAYS = ("np.ndarray", "ndarray", "NDArray", "tuple[", "list[", "Sequence[")
+
+
+def toml_type(annotation: Any) -> tuple[str, tuple[Any, ...] | None]:
+    """The TOML type (and choices) an annotation stands for: ``float | None`` -> ``("float", None)``.
+
+    A ``Literal`` of strings is ``"str"`` with its values as choices; an
+    array, tuple or list is ``"vector"``; anything else ``"any"``.
+    """
+    text = annotation if isinstance(annotation, str) else getattr(annotation, "__name__", str(annotation))
+    parts = [p.strip() for p in _split_union(text) if p.strip() not in ("None", "NoneType")]
+    if len(parts) != 1:
+        return "any", None
+    a = parts[0]
+    for prefix in ("Literal[", "typing.Literal["):
+        if a.startswith(prefix) and a.endswith("]"):
+            values = ast.literal_eval(f"({a[len(prefix):-1]},)")
+            return ("str" if all(isinstance(v, str) for v in values) else "any"), tuple(values)
+    if a in _SIMPLE:
+        return _SIMPLE[a], None
+    if a.startswith(_ARRAYS) or a in _ARRAYS:
+        return "vector", None
+    return "any", None
+
+
+def _split_union(text: str) -> list[str]:
+    """``a | b[c | d]`` -> ``["a ", " b[c | d]"]``: split on ``|`` outside brackets."""
+    parts, depth, cur = [], 0, ""
+    for ch in text:
+        depth += ch == "["
+        depth -= ch == "]"
+        if ch == "|" and depth == 0:
+            parts.append(cur)
+            cur = ""
+        else:
+            cur += ch
+    return [*parts, cur]
+
+
+def _docstring_entries(cls: Type[Any]) -> dict[str, str]:
+    """First sentence of each entry of the numpy docstring's Parameters / Attributes sections."""
+    lines = (inspect.getdoc(cls) or "").splitlines()
+    out: dict[str, str] = {}
+    in_section = False
+    names: list[str] = []
+    text: list[str] = []
+
+    def flush() -> None:
+        sentence = " ".join(text).split(". ")[0].strip().rstrip(".")
+        for n in names:
+            out.setdefault(n, sentence)
+
+    for i, line in enumerate(lines):
+        if i + 1 < len(lines) and lines[i + 1].strip() and set(lines[i + 1].strip()) == {"-"}:
+            flush()
+            names, text = [], []
+            in_section = line.strip() in ("Parameters", "Attributes", "Other Parameters")
+            continue
+        if not in_section or set(line.strip()) == {"-"}:
+            continue
+        if line and not line.startswith(" "):
+            flush()
+            names, text = [n.strip() for n in line.split(":")[0].split(",")], []
+        elif line.strip():
+            text.append(line.strip())
+        elif text:  # a blank line ends the entry's first paragraph
+            flush()
+            names, text = [], []
+    flush()
+    return out
 
 
 # --------------------------------------------------------------------------

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import json
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -21,6 +20,7 @@ from .reduction import (
     merge_statistics,
     run_sum,
 )
+from .tables import write_csv
 
 __all__ = ["FilterResult", "MonteCarloResult", "STORE_MODES"]
 
@@ -503,18 +503,13 @@ class MonteCarloResult:
     def to_csv(self, path: str | Path) -> Path:
         """Write :meth:`summary` as CSV; returns the path."""
         rows = self.summary()
-        path = Path(path)
         fields: list[str] = []
         for r in rows:
             for key in r:
                 if key not in fields:
                     fields.append(key)
-        with path.open("w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=fields)
-            w.writeheader()
-            for r in rows:
-                w.writerow({k: _fmt(v) for k, v in r.items()})
-        return path
+        write_csv(path, fields, ([r.get(k) for k in fields] for r in rows))
+        return Path(path)
 
     def to_json(self, path: str | Path, extra: dict[str, Any] | None = None) -> Path:
         """Write the summary, seed, config and ``extra`` as JSON; returns the path."""
@@ -533,8 +528,3 @@ class MonteCarloResult:
         path.write_text(json.dumps(doc, indent=2, default=json_default) + "\n")
         return path
 
-
-def _fmt(v: Any) -> Any:
-    if isinstance(v, float):
-        return repr(v)
-    return v

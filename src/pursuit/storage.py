@@ -23,7 +23,6 @@ result objects.
 
 from __future__ import annotations
 
-import csv
 import json
 import zipfile
 from pathlib import Path
@@ -32,9 +31,9 @@ from typing import Any, Iterable
 import numpy as np
 
 from ._json import json_default
-from .experiment import ExperimentOutput, Table
 from .reduction import FilterStatistics
 from .results import FilterResult, MonteCarloResult
+from .tables import ExperimentOutput, Table, write_csv
 
 __all__ = [
     "save_result",
@@ -198,8 +197,6 @@ def write_errors_csv(path: str | Path, experiment: str, results: dict[str, Monte
     has them), ``nees`` and ``nis`` (empty where not available).  For a
     summary-mode result only the example runs it kept are listed.
     """
-    path = Path(path)
-    rows = 0
     ordered: list[str] = []
     for r in results.values():
         for lab in r.state_labels:
@@ -210,9 +207,7 @@ def write_errors_csv(path: str | Path, experiment: str, results: dict[str, Monte
     has_vel = any(r.velocity_indices for r in results.values())
     header = ["experiment", "result", "filter", "run", "step", "time", *(f"err_{lab}" for lab in labels)]
     header += (["err_position"] if has_pos else []) + (["err_velocity"] if has_vel else []) + ["nees", "nis"]
-    with path.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(header)
+    def lines():
         for key, result in results.items():
             if result.truth is None and result.examples is None:
                 continue
@@ -235,9 +230,9 @@ def write_errors_csv(path: str | Path, experiment: str, results: dict[str, Monte
                 nis = fr.info.get("nis")
                 cols.append(_f(np.asarray(nis).T) if nis is not None else [""] * (K * R))
                 for i in range(K * R):
-                    w.writerow([experiment, key, name, run_col[i], step_col[i], time_col[i], *(c[i] for c in cols)])
-                rows += K * R
-    return rows
+                    yield [experiment, key, name, run_col[i], step_col[i], time_col[i], *(c[i] for c in cols)]
+
+    return write_csv(path, header, lines())
 
 
 def write_per_step_csv(path: str | Path, experiment: str, results: dict[str, MonteCarloResult]) -> int:
@@ -278,12 +273,7 @@ def write_per_step_csv(path: str | Path, experiment: str, results: dict[str, Mon
         for c in row:
             if c not in fields:
                 fields.append(c)
-    with Path(path).open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=fields)
-        w.writeheader()
-        for row in table:
-            w.writerow({c: repr(v) if isinstance(v, float) else v for c, v in row.items()})
-    return len(table)
+    return write_csv(path, fields, ([row.get(c) for c in fields] for row in table))
 
 
 # --------------------------------------------------------------------------

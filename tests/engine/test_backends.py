@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 import pytest
 
-from pursuit.components.scenarios import _cv_position, _wsn
+from pursuit.config.scenarios import _cv_position, _wsn
 from pursuit.engine import monte_carlo
 from pursuit.engine.backends import LocalProcesses, Serial, WorkerLost, WorkerRestart, engine_options, make_backend
 from pursuit.scenarios import LinearCV, WSNRange

@@ -232,7 +232,7 @@ def test_bad_parameters_are_refused():
 def test_pf_improves_with_more_particles_on_ungm():
     # Paper P1 §6 expects the PF to improve as N grows; shown here with a paired
     # run-by-run comparison over the p1-ungm set-up (100 runs, 50 steps).
-    from pursuit.components.sweep import paired_difference, run_metric
+    from pursuit.experiments.sweep import paired_difference, run_metric
 
     sc = UNGM(steps=50)
     errs = {}

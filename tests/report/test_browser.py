@@ -79,8 +79,8 @@ def test_index_page_links_every_report(chromium, artifacts, output):
 
 def _wide_output(folder: Path) -> Path:
     """An output folder whose summary table is as wide as p3-upf's (16 columns of four-decimal numbers)."""
-    from pursuit.experiment import ExperimentOutput, Table
     from pursuit.report.output import write_output
+    from pursuit.tables import ExperimentOutput, Table
 
     cols = ["variant", "l", "filter", "rmse", "ci95", "rms_x", "rms_vx", "rms_y", "rms_vy", "rmse_position",
             "rmse_velocity", "nis_mean", "ess_mean", "resample_rate", "wall_time_s", "runs"]

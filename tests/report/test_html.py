@@ -8,12 +8,13 @@ import re
 import pytest
 from matplotlib.figure import Figure
 
-from pursuit.components.experiments import standard_figures, summary_table
 from pursuit.engine import monte_carlo
-from pursuit.experiment import ExperimentOutput, Table, find_experiment, list_experiments, load_experiment
+from pursuit.experiment import find_experiment, list_experiments, load_experiment
+from pursuit.experiments.montecarlo import standard_figures, summary_table
 from pursuit.report.figures import figure_problems
 from pursuit.report.html import render_report, write_index, write_report
 from pursuit.report.output import write_output
+from pursuit.tables import ExperimentOutput, Table
 
 from ..engine.helpers import SMALL, small_filters
 

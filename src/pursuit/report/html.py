@@ -12,13 +12,12 @@ from __future__ import annotations
 import base64
 import html
 import json
-import os
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
-from .output import cell
+from ..io.output_file import write_whole
+from ..tables import cell
 
 __all__ = ["write_report", "write_index", "render_report", "render_index", "REPORT_NAME", "INDEX_NAME"]
 
@@ -199,24 +198,6 @@ def _page(title: str, body: str) -> str:
     )
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
 def write_report(folder: str | Path, *, warn: bool = True) -> Path:
     """Write ``report.html`` into an output folder from its files; returns its path.
 
@@ -229,7 +210,7 @@ def write_report(folder: str | Path, *, warn: bool = True) -> Path:
         for p in problems:
             print(f"pursuit: warning: {folder}: {p}", file=sys.stderr)
     path = folder / REPORT_NAME
-    _atomic_write(path, text)
+    write_whole(path, text)
     return path
 
 
@@ -264,5 +245,5 @@ def write_index(root: str | Path, folders: list[Path]) -> Path:
     """Write ``index.html`` into ``root`` linking every output folder's report; returns its path."""
     root = Path(root)
     path = root / INDEX_NAME
-    _atomic_write(path, render_index(root, folders))
+    write_whole(path, render_index(root, folders))
     return path

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import json
 import os
 import platform
@@ -17,8 +16,9 @@ import numpy as np
 
 from .._json import json_default
 from ..engine.montecarlo import DEFAULT_KEEP_RUNS
-from ..experiment import ExperimentOutput, Table
 from ..results import MonteCarloResult
+from ..tables import ExperimentOutput, Table, cell, write_csv
+from . import html
 
 __all__ = ["write_output", "format_table", "versions", "cell", "FILES"]
 
@@ -54,20 +54,6 @@ def versions() -> dict[str, str]:
     return out
 
 
-def cell(v: Any) -> str:
-    """One table value as text: floats with four decimals (or scientific when tiny or huge)."""
-    if v is None:
-        return ""
-    if isinstance(v, (float, np.floating)):
-        if not np.isfinite(v):
-            return str(v)
-        a = abs(float(v))
-        if a != 0 and (a < 1e-3 or a >= 1e6):
-            return f"{v:.4e}"
-        return f"{v:.4f}"
-    return str(v)
-
-
 def format_table(table: Table) -> str:
     """A table as aligned plain text, with its title and notes."""
     cells = [[cell(v) for v in row] for row in table.rows]
@@ -88,14 +74,6 @@ def _numeric(s: str) -> bool:
         return True
     except ValueError:
         return False
-
-
-def _write_csv(path: Path, table: Table) -> None:
-    with path.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(table.columns)
-        for row in table.rows:
-            w.writerow(["" if v is None else (repr(float(v)) if isinstance(v, (float, np.floating)) else v) for v in row])
 
 
 def _runs_kept_whole(results: dict[str, Any]) -> int | None:
@@ -161,7 +139,6 @@ def write_output(
         write_errors_csv,
         write_per_step_csv,
     )
-    from .html import write_report
 
     formats = tuple(dict.fromkeys(("png", *formats)))
     out_dir = Path(os.path.abspath(out_dir))  # "." has no name to put the helper folders beside
@@ -171,7 +148,7 @@ def write_output(
     try:
         files = {}
         for table in output.tables:
-            _write_csv(tmp / f"{table.name}.csv", table)
+            write_csv(tmp / f"{table.name}.csv", table.columns, table.rows)
             files[f"{table.name}.csv"] = table.title or table.name
         # light by default: the per-step summaries of every run, the arrays of the first few
         saved = output.results if full_data else {
@@ -217,7 +194,7 @@ def write_output(
         files["report.html"] = FILES["report.html"]
         sidecar["files"] = {"run.json": FILES["run.json"], **files}
         (tmp / "run.json").write_text(json.dumps(sidecar, indent=2, default=json_default) + "\n")
-        write_report(tmp)
+        html.write_report(tmp)  # looked up on the module at call time (tests replace it)
         replace(tmp, out_dir)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -29,13 +29,13 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from ..config.build import build_filters, build_scenario, resolve_section
 from ..engine.montecarlo import monte_carlo
-from ..experiment import ExperimentOutput, Table
 from ..registry import Param, register
 from ..report.figures import consistency_over_time
 from ..report.maneuver import Segment, detection_rates, mode_probabilities, rmse_panels
 from ..results import MonteCarloResult
-from .experiments import build_filters, build_scenario, resolve_section
+from ..tables import ExperimentOutput, Table
 
 __all__ = ["ManeuverPlan"]
 

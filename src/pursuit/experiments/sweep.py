@@ -36,9 +36,9 @@ from typing import Any
 import numpy as np
 
 from .. import metrics, registry
+from ..config.build import build_filters, build_scenario, resolve_paper, resolve_section
 from ..engine.montecarlo import FILTER_STREAM, SCENARIO_STREAM, monte_carlo
 from ..engine.snapshots import particle_snapshots
-from ..experiment import ExperimentOutput, Table
 from ..registry import Param, register
 from ..report.figures import consistency_over_time, labelled, rmse_over_time, trajectory
 from ..report.sweep_figures import (
@@ -48,7 +48,8 @@ from ..report.sweep_figures import (
 )
 from ..results import MonteCarloResult
 from ..rng import run_streams
-from .experiments import build_filters, build_scenario, check_run_exists, resolve_paper, resolve_section, run_index
+from ..tables import ExperimentOutput, Table
+from .montecarlo import check_run_exists, run_index
 
 __all__ = ["SweepPlan", "run_metric", "paired_difference"]
 

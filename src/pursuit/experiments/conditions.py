@@ -32,12 +32,12 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from ..config.build import build_filters, build_scenario, resolve_paper, resolve_section
 from ..engine.montecarlo import monte_carlo
-from ..experiment import ExperimentOutput, Table
 from ..registry import Param, register
 from ..report.figures import consistency_over_time, fading_over_time, rmse_over_time
 from ..results import MonteCarloResult
-from .experiments import build_filters, build_scenario, resolve_paper, resolve_section
+from ..tables import ExperimentOutput, Table
 
 __all__ = ["ConditionsPlan", "cumulative_rmse", "improvement"]
 

@@ -16,7 +16,7 @@ from ..filters.gaussian import (
     KalmanFilter,
     UnscentedKalmanFilter,
 )
-from ..registry import Param, register
+from ..registry import Param, params_from, register
 
 
 def build_fading(field: str, value: Any):
@@ -46,7 +46,7 @@ register(
     "fading",
     "constant",
     "Constant fading factor λ; λ = 1 is the plain filter (a bare number means the same)",
-    params=(Param("lam", "float", 1.0, "fading factor, at least 1"),),
+    params=params_from(Constant, ["lam"], docs={"lam": "fading factor, at least 1"}),
 )(Constant)
 
 TFMKF_LAMBDA = 1.23
@@ -57,13 +57,14 @@ TFMKF_LAMBDA = 1.23
     "fading",
     "tfmkf",
     f"Constant fading factor λ = {TFMKF_LAMBDA} unless given (the TFMKF of Ma & Zheng's underwater TOA paper)",
-    params=(Param("lam", "float", TFMKF_LAMBDA, "fading factor, at least 1"),),
+    params=(Param("lam", "float", TFMKF_LAMBDA, "fading factor, at least 1", own=True),),
+    target=Constant,
 )
-def _tfmkf(lam: float = TFMKF_LAMBDA) -> Constant:
+def _tfmkf(lam: float) -> Constant:
     """TFMKF: :class:`~pursuit.filters.fading.Constant` with paper P2's λ = 1.23 as the default."""
     return Constant(lam)
 
-NAME = Param("name", "str", None, "label in tables and figures (default: the filter's short name)")
+NAME = Param("name", "str", "", "label in tables and figures (default: the filter's short name)")
 BACKEND = Param(
     "backend",
     "str",
@@ -85,21 +86,25 @@ GATE = Param(
 )
 
 
-def make_filter(cls, scenario, where: str, name: str | None, **kw):
-    """Build ``cls(scenario.motion, scenario.measurement, ...)``, re-anchoring errors under ``where``."""
+def make_filter(cls, scenario, where: str, **kw):
+    """Build ``cls(scenario.motion, scenario.measurement, **kw)``, re-anchoring errors under ``where``.
+
+    ``kw`` are the resolved parameters; ``backend = None`` (not set) is left
+    out so the class's own default applies.
+    """
     if kw.get("backend", "") is None:
         kw.pop("backend")
     try:
-        return cls(scenario.motion, scenario.measurement, name=name or "", **kw)
+        return cls(scenario.motion, scenario.measurement, **kw)
     except TypeError as e:  # the filter cannot use this scenario's models
         raise ValueError(f"{where}.type: {e}") from None
     except ValueError as e:
         raise ValueError(f"{where}.{e}") from None
 
 
-@register("filter", "kf", "Linear Kalman filter (Joseph form)", params=(NAME, FADING, GATE, BACKEND))
-def _kf(scenario, where="filter", name=None, fading=None, gate=None, backend=None):
-    return make_filter(KalmanFilter, scenario, where, name, fading=fading, gate=gate, backend=backend)
+@register("filter", "kf", "Linear Kalman filter (Joseph form)", params=(NAME, FADING, GATE, BACKEND), target=KalmanFilter)
+def _kf(scenario, where="filter", **kw):
+    return make_filter(KalmanFilter, scenario, where, **kw)
 
 
 @register(
@@ -107,9 +112,10 @@ def _kf(scenario, where="filter", name=None, fading=None, gate=None, backend=Non
     "ekf",
     "Extended Kalman filter (Joseph form; numerical Jacobians if the model has none)",
     params=(NAME, FADING, GATE, BACKEND),
+    target=ExtendedKalmanFilter,
 )
-def _ekf(scenario, where="filter", name=None, fading=None, gate=None, backend=None):
-    return make_filter(ExtendedKalmanFilter, scenario, where, name, fading=fading, gate=gate, backend=backend)
+def _ekf(scenario, where="filter", **kw):
+    return make_filter(ExtendedKalmanFilter, scenario, where, **kw)
 
 
 @register(
@@ -119,19 +125,26 @@ def _ekf(scenario, where="filter", name=None, fading=None, gate=None, backend=No
     params=(
         NAME,
         FADING,
-        Param("alpha", "float", 1.0, "sigma-point spread"),
-        Param("beta", "float", 2.0, "prior-knowledge weight (2 is optimal for Gaussians)"),
-        Param("kappa", "float", 0.0, "secondary scaling"),
+        *params_from(
+            UnscentedKalmanFilter,
+            ["alpha", "beta", "kappa"],
+            docs={"alpha": "sigma-point spread", "beta": "prior-knowledge weight (2 is optimal for Gaussians)", "kappa": "secondary scaling"},
+        ),
         GATE,
         BACKEND,
     ),
+    target=UnscentedKalmanFilter,
 )
-def _ukf(scenario, where="filter", name=None, fading=None, alpha=1.0, beta=2.0, kappa=0.0, gate=None, backend=None):
-    return make_filter(
-        UnscentedKalmanFilter, scenario, where, name, fading=fading, alpha=alpha, beta=beta, kappa=kappa, gate=gate, backend=backend
-    )
+def _ukf(scenario, where="filter", **kw):
+    return make_filter(UnscentedKalmanFilter, scenario, where, **kw)
 
 
-@register("filter", "ckf", "Cubature Kalman filter (third-degree spherical-radial rule)", params=(NAME, FADING, GATE, BACKEND))
-def _ckf(scenario, where="filter", name=None, fading=None, gate=None, backend=None):
-    return make_filter(CubatureKalmanFilter, scenario, where, name, fading=fading, gate=gate, backend=backend)
+@register(
+    "filter",
+    "ckf",
+    "Cubature Kalman filter (third-degree spherical-radial rule)",
+    params=(NAME, FADING, GATE, BACKEND),
+    target=CubatureKalmanFilter,
+)
+def _ckf(scenario, where="filter", **kw):
+    return make_filter(CubatureKalmanFilter, scenario, where, **kw)

@@ -9,7 +9,7 @@ import pytest
 
 from pursuit import metrics
 from pursuit.cli import main
-from pursuit.components.conditions import improvement
+from pursuit.experiments.conditions import improvement
 from pursuit.experiment import ConfigError, load_experiment
 
 ROOT = Path(__file__).resolve().parents[2]

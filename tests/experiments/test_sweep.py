@@ -9,7 +9,7 @@ import pytest
 
 from pursuit import registry
 from pursuit.cli import main
-from pursuit.components.sweep import paired_difference
+from pursuit.experiments.sweep import paired_difference
 from pursuit.experiment import ConfigError, find_experiment, load_experiment
 
 SMALL = """

@@ -6,24 +6,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .. import registry
+from ..config.build import build_filters, build_scenario, resolve_paper, resolve_section
 from ..engine.backends import current_options
-from ..engine.montecarlo import DEFAULT_KEEP_RUNS, monte_carlo, validate_filters
-from ..experiment import ExperimentOutput, Table
+from ..engine.montecarlo import DEFAULT_KEEP_RUNS, monte_carlo
 from ..registry import Param, register
 from ..report.figures import consistency_over_time, rmse_over_time, trajectory
 from ..results import MonteCarloResult
+from ..tables import ExperimentOutput, Table
 
 __all__ = [
     "MonteCarloPlan",
-    "build_scenario",
-    "build_filter",
-    "build_filters",
     "summary_table",
     "consistency_table",
     "paper_table",
-    "PAPER_PARAMS",
+    "standard_figures",
 ]
+
 
 def run_index(field_name: str, v: int) -> int:
     """A ``Param`` check: a run number is a non-negative integer (runs are numbered from 0)."""
@@ -45,83 +43,6 @@ FIGURE_PARAMS = (
     Param("trajectory_run", "int", 0, "which run's trajectory to draw (0 .. runs-1)", check=run_index),
     Param("log_rmse", "bool", False, "logarithmic RMSE axes"),
 )
-
-PAPER_PARAMS = (
-    Param("filter", "str", doc="filter name as in [[filters]]"),
-    Param("metric", "str", doc="a summary column, e.g. rmse_position, rms_x, wall_time_s"),
-    Param("value", "float", doc="the paper's number"),
-    Param("note", "str", "", "where the number comes from, caveats"),
-)
-
-
-def build_scenario(sections: dict[str, Any]) -> Any:
-    """Build the ``[scenario]`` table through the registry."""
-    table = sections.get("scenario")
-    if table is None:
-        raise ValueError("scenario: required section is missing")
-    if not isinstance(table, dict):
-        raise ValueError("scenario: expected a table")
-    values = dict(table)
-    kind = values.pop("type", None)
-    if kind is None:
-        raise ValueError("scenario.type: required (see `pursuit list`)")
-    comp = registry.get("scenario", kind, "scenario.type")
-    return comp.build(where="scenario", **comp.resolve(values, "scenario"))
-
-
-def build_filter(entry: dict[str, Any], scenario: Any, where: str) -> Any:
-    """Build one filter table ``{type = ..., ...}`` against the scenario; errors are prefixed with ``where``."""
-    values = dict(entry)
-    kind = values.pop("type", None)
-    if kind is None:
-        raise ValueError(f"{where}.type: required (see `pursuit list`)")
-    comp = registry.get("filter", kind, f"{where}.type")
-    return comp.build(scenario=scenario, where=where, **comp.resolve(values, where))
-
-
-def build_filters(sections: dict[str, Any], scenario: Any) -> list[Any]:
-    """Build every ``[[filters]]`` entry against the scenario."""
-    entries = sections.get("filters")
-    if entries is None:
-        raise ValueError("filters: required section is missing (add [[filters]] tables)")
-    if not isinstance(entries, list) or not entries or not all(isinstance(e, dict) for e in entries):
-        raise ValueError("filters: expected one or more [[filters]] tables")
-    out = [build_filter(entry, scenario, f"filters[{i}]") for i, entry in enumerate(entries)]
-    try:
-        return validate_filters(out)
-    except ValueError as e:
-        raise ValueError(str(e)) from None
-
-
-def resolve_section(sections: dict[str, Any], name: str, params: tuple[Param, ...]) -> dict[str, Any]:
-    """Check an optional plain table against a parameter list."""
-    table = sections.get(name, {})
-    if not isinstance(table, dict):
-        raise ValueError(f"{name}: expected a table")
-    return registry.Component("section", name, "", params, dict).resolve(table, name)
-
-
-def resolve_paper(
-    sections: dict[str, Any], filter_names: list[str] | set[str], params: tuple[Param, ...] = PAPER_PARAMS
-) -> list[dict[str, Any]]:
-    """Check the ``[[paper]]`` reference values against ``params``; each must name a known filter.
-
-    Kinds with extra keys (a condition, a swept value) pass their own
-    ``params`` and check those keys on the returned entries.
-    """
-    entries = sections.get("paper", [])
-    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
-        raise ValueError("paper: expected [[paper]] tables")
-    out = []
-    for i, entry in enumerate(entries):
-        where = f"paper[{i}]"
-        vals = registry.Component("section", "paper", "", params, dict).resolve(entry, where)
-        if vals["filter"] not in filter_names:
-            have = ", ".join(sorted(filter_names) if isinstance(filter_names, set) else filter_names)
-            raise ValueError(f"{where}.filter: no filter named {vals['filter']!r} (have {have})")
-        out.append(vals)
-    return out
-
 
 CONSISTENCY_COLUMNS = ("anees", "anees_low", "anees_high", "anees_inside", "anis", "anis_low", "anis_high", "anis_inside")
 
