@@ -543,6 +543,10 @@ class AdaptiveCSFilter(_AxisFilter):
         V = np.where(measured, V, V_old)
 
         ratio = np.where(detect, D / self.threshold, 1.0)
+        # The scalar STF of paper P4, per axis and only on detection.  Not
+        # fading_adaptive.StrongTracking: that one averages as (1 − d)V + dν² (other
+        # rounding than (ρV + ν²)/(1 + ρ) above) and bounds λ by λ_max and the
+        # conditioning ceiling, so sharing it would change APCS's results.
         if self.fading == "stf":
             N = V - Q0[..., 0, 0] - self.beta_s * r
             lam = np.where(detect, np.maximum(1.0, N / FPFt0[..., 0, 0]), 1.0)

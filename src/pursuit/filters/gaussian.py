@@ -71,7 +71,7 @@ from .._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, mv, quad, sy
 from .._validation import in_range, measurement_for_step, model_dim, nonnegative, prior_of_size, time_step
 from ..gaussian import Gaussian
 from ..rng import RNGLike
-from .base import CompiledPath, FilterBase, as_gaussian, prior_batch
+from .base import FilterBase, as_gaussian, prior_batch
 from .fading import Constant, FadingContext, FadingStrategy, NoFading
 from .gating import apply_gate, keep_prediction
 from .jacobians import call_with_dt as _call
