@@ -24,7 +24,7 @@ A filter names its compiled implementation in one place, the class attribute
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable, ClassVar, NamedTuple
+from typing import Any, Callable, ClassVar
 
 import numpy as np
 
@@ -35,7 +35,8 @@ from ..gaussian import Gaussian
 __all__ = ["FilterBase", "CompiledPath", "prior_batch", "as_gaussian"]
 
 
-class CompiledPath(NamedTuple):
+@dataclass(frozen=True)
+class CompiledPath:
     """A filter's compiled implementation: what :attr:`FilterBase.compiled_path` names.
 
     Attributes
