@@ -174,7 +174,9 @@ class FilterBase:
         return owner is not None and type(self).step is owner.step
 
     # -- whole sequences -------------------------------------------------------------
-    def run_sequence(self, state: Any, zs: np.ndarray, *, keep_cov: bool = True) -> tuple[np.ndarray, np.ndarray | None, dict[str, np.ndarray]] | None:
+    def run_sequence(
+        self, state: Any, zs: np.ndarray, *, keep_cov: bool = True
+    ) -> tuple[np.ndarray, np.ndarray | None, dict[str, np.ndarray]] | None:
         """All steps of ``zs (K, *batch, m)`` in one compiled call, or ``None`` where that does not apply.
 
         :func:`pursuit.run` asks this first.  It applies to a compiled filter

@@ -74,8 +74,7 @@ from ..rng import RNGLike
 from .base import FilterBase, as_gaussian, prior_batch
 from .fading import Constant, FadingContext, FadingStrategy, NoFading
 from .gating import apply_gate, keep_prediction
-from .jacobians import call_with_dt as _call
-from .jacobians import measurement_jacobian, motion_jacobian
+from .jacobians import call_with_dt, measurement_jacobian, motion_jacobian
 
 __all__ = [
     "GaussianState",
@@ -521,9 +520,9 @@ class ExtendedKalmanFilter(_GaussianFilter):
 
     def _predict(self, x, P, k, dt):
         F = motion_jacobian(self.motion, x, k, dt)
-        mean = np.asarray(_call(self.motion.f, x, k, dt=dt), dtype=float)
+        mean = np.asarray(call_with_dt(self.motion.f, x, k, dt=dt), dtype=float)
         PFt = P @ _t(F)
-        return _Prediction(mean, F @ PFt, np.asarray(_call(self.motion.cov, k, dt=dt), dtype=float), PFt)
+        return _Prediction(mean, F @ PFt, np.asarray(call_with_dt(self.motion.cov, k, dt=dt), dtype=float), PFt)
 
     def _measure(self, x_pred, P_pred, k):
         H = measurement_jacobian(self.measurement, x_pred, k)
@@ -560,9 +559,9 @@ class KalmanFilter(ExtendedKalmanFilter):
         return "KF"
 
     def _predict(self, x, P, k, dt):
-        F = np.asarray(_call(self.motion.transition_matrix, k, dt=dt), dtype=float)
+        F = np.asarray(call_with_dt(self.motion.transition_matrix, k, dt=dt), dtype=float)
         PFt = P @ F.T
-        return _Prediction(mv(F, x), F @ PFt, np.asarray(_call(self.motion.cov, k, dt=dt), dtype=float), PFt)
+        return _Prediction(mv(F, x), F @ PFt, np.asarray(call_with_dt(self.motion.cov, k, dt=dt), dtype=float), PFt)
 
     def _measure(self, x_pred, P_pred, k):
         H = np.asarray(self.measurement.matrix(k), dtype=float)
@@ -606,13 +605,13 @@ class _SigmaPointFilter(_GaussianFilter):
 
     def _predict(self, x, P, k, dt):
         chi, wm, wc, repaired = self._points(x, P)
-        Y = np.asarray(_call(self.motion.f, chi, k, dt=dt), dtype=float)
+        Y = np.asarray(call_with_dt(self.motion.f, chi, k, dt=dt), dtype=float)
         mean = np.matmul(wm, Y)
         dY = Y - mean[..., None, :]
         dX = chi - x[..., None, :]
         propagated = symmetrize(_t(dY * wc[:, None]) @ dY)
         cross = _t(dX * wc[:, None]) @ dY
-        Q = np.asarray(_call(self.motion.cov, k, dt=dt), dtype=float)
+        Q = np.asarray(call_with_dt(self.motion.cov, k, dt=dt), dtype=float)
         return _Prediction(mean, propagated, Q, cross, repaired)
 
     def _measure(self, x_pred, P_pred, k):

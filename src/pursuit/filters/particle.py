@@ -71,8 +71,8 @@ from ..gaussian import Gaussian
 from ..models.measurement import _GaussianNoise, gaussian_loglik
 from ..rng import RNGLike, RunStreams, as_rng
 from .base import FilterBase, prior_batch
-from .workspace import Workspace, scratch
 from .resample import get_resampler, repeat_particles
+from .workspace import Workspace, scratch
 
 __all__ = [
     "ParticleState",
