@@ -24,13 +24,23 @@ A filter asked for ``"numba"`` whose models (or options) have no compiled
 path computes with NumPy and emits a :class:`CompiledBackendWarning` naming
 the reason; its ``compiled`` attribute is then ``False``.  Asking for
 ``"numba"`` when numba is not installed raises ``ImportError``.
+
+This module is also the one seam to the compiled side: a filter names its
+compiled implementation by a string (its ``compiled_path`` class attribute,
+see :class:`pursuit.filters.base.FilterBase`), and :func:`compiled_implementation`
+loads it with :mod:`importlib` on first use, so nothing imports
+:mod:`pursuit._compiled` (or numba) until a filter computes with it, and the
+compiled side may import the filters without an import cycle.
 """
 
 from __future__ import annotations
 
+import importlib
 import importlib.util
 import os
 import warnings
+from functools import lru_cache
+from typing import Any
 
 __all__ = [
     "BACKENDS",
@@ -39,7 +49,11 @@ __all__ = [
     "set_default_backend",
     "numba_available",
     "resolve_backend",
+    "compiled_specs",
+    "compiled_implementation",
 ]
+
+_COMPILED_PACKAGE = "pursuit._compiled"
 
 BACKENDS = ("numpy", "numba")
 """The compute backends a filter accepts."""
@@ -98,3 +112,29 @@ def fallback_warning(filt: object, reason: str) -> None:
         CompiledBackendWarning,
         stacklevel=4,
     )
+
+
+def compiled_specs(motion: Any, measurement: Any, *, need_diagonal: bool, linear_motion: bool = False) -> tuple[Any, Any] | str:
+    """The compiled form of a model pair (:func:`pursuit._compiled.specs.model_specs`), or the reason there is none.
+
+    Imports no numba.  ``linear_motion`` also refuses a motion model that is
+    not linear (the compiled Gaussian filters propagate with ``F``).
+    """
+    specs_module = importlib.import_module(f"{_COMPILED_PACKAGE}.specs")
+    specs = specs_module.model_specs(motion, measurement, need_diagonal=need_diagonal)
+    if isinstance(specs, str):
+        return specs
+    if linear_motion and specs[0].kind != specs_module.LINEAR:
+        return f"motion model {type(motion).__name__} in a Gaussian filter (compiled: linear motion)"
+    return specs
+
+
+@lru_cache(maxsize=None)
+def compiled_implementation(path: str) -> Any:
+    """The compiled implementation named ``"module:attribute"`` inside :mod:`pursuit._compiled` (imports numba).
+
+    For example ``"gaussian:EKF"`` is ``pursuit._compiled.gaussian.EKF``, a
+    :class:`pursuit.filters.base.CompiledPath`.
+    """
+    module, _, attribute = path.partition(":")
+    return getattr(importlib.import_module(f"{_COMPILED_PACKAGE}.{module}"), attribute)

@@ -9,7 +9,7 @@ pytest.importorskip("numba")
 
 import pursuit as pu  # noqa: E402
 from pursuit._compiled import streams  # noqa: E402
-from pursuit.filters._workspace import Workspace, recycled  # noqa: E402
+from pursuit.filters.workspace import Workspace, recycled  # noqa: E402
 from pursuit.rng import RunStreams, run_streams  # noqa: E402
 from pursuit.scenarios.ungm import UNGM  # noqa: E402
 

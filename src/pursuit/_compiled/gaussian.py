@@ -12,12 +12,20 @@ generated for its model's structure (:mod:`pursuit._compiled.kf_codegen`),
 for the step path and the whole-sequence path alike, so both give the same
 bits; other measurements run the block kernels of
 :mod:`pursuit._compiled.gauss_kernels`.
+
+The filters reach this module only through their ``compiled_path``
+(:data:`EKF`, :data:`SIGMA`, loaded by :func:`pursuit.compute.compiled_implementation`);
+it uses only the filters' public API.
 """
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
+from ..filters.base import CompiledPath
+from ..filters.gating import apply_gate
 from ..filters.gaussian import GaussianState
 from ..gaussian import Gaussian
 from . import gauss_kernels as GK
@@ -25,7 +33,7 @@ from . import generated, kf_codegen
 from .particle import measurement_args, use_parallel
 from .specs import M_LINEAR
 
-__all__ = ["gaussian_step", "gaussian_sequence", "lanes"]
+__all__ = ["gaussian_step", "gaussian_sequence", "lanes", "EKF", "SIGMA"]
 
 
 def lanes(a: np.ndarray, core: int) -> np.ndarray:
@@ -85,7 +93,7 @@ def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, 
         if kind == "ekf":
             (GK.ekf_step_parallel if par else GK.ekf_step_serial)(x, P, zl, valid, F, Q, lam, *margs, *outs)
         else:
-            cscale, wm, wc = filt._weights(n)
+            cscale, wm, wc = filt.sigma_weights(n)
             centre = wm.shape[0] % 2 == 1
             (GK.sigma_step_parallel if par else GK.sigma_step_serial)(
                 x, P, zl, valid, F, Q, lam, *margs, float(cscale), np.ascontiguousarray(wm), np.ascontiguousarray(wc), centre, *outs
@@ -106,14 +114,12 @@ def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, 
     new_mean, new_cov = x_out.T, P_out.transpose(2, 0, 1)
     gated = np.zeros(M, dtype=bool)
     if filt.gate is not None:  # the chi-square gate of the NumPy step, on the compiled results
-        from ..filters.gaussian import _apply_gate
-
-        new_mean, new_cov, gated = _apply_gate(filt.gate, info, info["pred_mean"], info["pred_cov"], new_mean, new_cov)
+        new_mean, new_cov, gated = apply_gate(filt.gate, info, info["pred_mean"], info["pred_cov"], new_mean, new_cov)
     info["gated"] = gated
     if not ok.all():  # recompute the runs whose covariance needs the NumPy repair
         rows = np.flatnonzero(~ok)
         sub = GaussianState(mean=mean[rows], cov=cov[rows], k=state.k, memory=None)
-        s2, i2 = filt._step_numpy(sub, np.broadcast_to(z, (*batch, m)).reshape(M, m)[rows], k, dt)
+        s2, i2 = filt.numpy_step(sub, np.broadcast_to(z, (*batch, m)).reshape(M, m)[rows], k, dt)
         new_mean, new_cov = new_mean.copy(), new_cov.copy()
         new_mean[rows], new_cov[rows] = s2.mean, s2.cov
         for key, value in i2.items():
@@ -181,14 +187,20 @@ def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_co
         "gated": np.zeros((K, M), dtype=bool),
     }
     if not ok.all():  # recompute, step by step, the runs whose covariance needed the NumPy repair
-        from ..engine.run import run
-
         rows = np.flatnonzero(~ok)
-        sub = Gaussian(state.mean[rows], np.broadcast_to(state.cov, (M, n, n))[rows])
-        track = run(filt, zs[:, rows], sub, keep_cov=keep_cov, sequence=False)
-        means[:, rows] = track.mean
-        if keep_cov:
-            covs[:, rows] = track.cov
-        for key in info:
-            info[key][:, rows] = track.info[key]
+        sub = filt.init(Gaussian(state.mean[rows], np.broadcast_to(state.cov, (M, n, n))[rows]), batch=(rows.size,))
+        for i in range(K):  # the filter's own steps, as pursuit.run would take them
+            sub, step_info = filt.step(sub, zs[i, rows], k=i + 1)
+            means[i, rows] = sub.mean
+            if keep_cov:
+                covs[i, rows] = sub.cov
+            for key in info:
+                info[key][i, rows] = step_info[key]
     return means, (covs if keep_cov else None), info
+
+
+EKF = CompiledPath(step=partial(gaussian_step, kind="ekf"), sequence=gaussian_sequence)
+"""The compiled KF/EKF (``ExtendedKalmanFilter.compiled_path``)."""
+
+SIGMA = CompiledPath(step=partial(gaussian_step, kind="sigma"))
+"""The compiled UKF/CKF (``UnscentedKalmanFilter.compiled_path``); no whole-sequence path."""

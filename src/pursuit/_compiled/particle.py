@@ -6,6 +6,11 @@ streams, runs :mod:`pursuit._compiled.pf_kernels`, and builds the same
 ``ParticleState`` and info keys as the NumPy step.  :func:`bootstrap_sequence`
 is what ``BootstrapParticleFilter.run_sequence`` calls: every step of every
 run in one kernel call, returned in :class:`pursuit.Track`'s layout.
+
+The filters reach this module only through their ``compiled_path``
+(:data:`BOOTSTRAP`, :data:`CUCKOO`, loaded by
+:func:`pursuit.compute.compiled_implementation`); it uses only the filters'
+public API.
 """
 
 from __future__ import annotations
@@ -15,15 +20,27 @@ from typing import Any
 
 import numpy as np
 
-from ..filters._workspace import memo, recycled, scratch
-from ..filters.particle import ParticleState, rows_rng
+from ..filters.base import CompiledPath
+from ..filters.cuckoo import mantegna_sigma
+from ..filters.particle import ParticleState, propagate_particles, rows_rng
+from ..filters.workspace import memo, recycled, scratch
 from ..rng import RunStreams
 from . import pf_kernels as K
 from .common import R_MULTINOMIAL, R_RESIDUAL, R_STRATIFIED, R_SYSTEMATIC
 from .specs import MeasurementSpec, MotionSpec
 from .streams import stream_addresses
 
-__all__ = ["bootstrap_step", "bootstrap_sequence", "run_stream_addresses", "use_parallel", "RESAMPLER_CODES", "measurement_args"]
+__all__ = [
+    "bootstrap_step",
+    "bootstrap_sequence",
+    "cuckoo_step",
+    "run_stream_addresses",
+    "use_parallel",
+    "RESAMPLER_CODES",
+    "measurement_args",
+    "BOOTSTRAP",
+    "CUCKOO",
+]
 
 RESAMPLER_CODES = {
     "systematic": R_SYSTEMATIC,
@@ -196,9 +213,7 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
     m = hs.dim
     work = state.work
     rng = state.rng
-    from ..filters.particle import _propagate
-
-    Xp = np.ascontiguousarray(_propagate(filt.motion, state.particles, k, dt, rng), dtype=float).reshape(B, N, n)
+    Xp = np.ascontiguousarray(propagate_particles(filt.motion, state.particles, k, dt, rng), dtype=float).reshape(B, N, n)
     logw = np.ascontiguousarray(state.logw, dtype=float).reshape(B, N)
     zf = np.ascontiguousarray(z, dtype=float).reshape(B, m)
     valid = ~np.isnan(zf)
@@ -221,8 +236,6 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
     pas = np.array([search.pa(t) for t in range(search.n_iter)] or [0.0])
     trend = {"off": CK.TREND_OFF, "exp": CK.TREND_EXP, "linear": CK.TREND_LINEAR}[search.trend]
     scaling = {"relative": CK.SCALE_RELATIVE, "absolute": CK.SCALE_ABSOLUTE, "std": CK.SCALE_STD}[search.step_scaling]
-    from ..filters.cuckoo import mantegna_sigma
-
     lower = np.full(n, -np.inf) if search.lower is None else np.broadcast_to(np.asarray(search.lower, float), (n,)).copy()
     upper = np.full(n, np.inf) if search.upper is None else np.broadcast_to(np.asarray(search.upper, float), (n,)).copy()
     use_stop = search.f_stop is not None
@@ -260,3 +273,10 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
         rng, k, uniform, work=work,
     )
     return new, info
+
+
+BOOTSTRAP = CompiledPath(step=bootstrap_step, sequence=bootstrap_sequence)
+"""The compiled bootstrap PF (``BootstrapParticleFilter.compiled_path``)."""
+
+CUCKOO = CompiledPath(step=cuckoo_step)
+"""The compiled CS-PF / ICS-PF (``CuckooParticleFilter.compiled_path``); no whole-sequence path."""

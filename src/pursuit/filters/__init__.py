@@ -1,5 +1,6 @@
 """Filters: each has ``init(prior, batch, rng)`` and ``step(state, z, k) -> (state, info)``."""
 
+from .base import CompiledPath, FilterBase
 from .cs import AdaptiveCSFilter, CurrentStatisticalFilter, ModifiedSingerFilter
 from .cuckoo import CSPF, ICSPF, CuckooParticleFilter, CuckooSearch
 from .fading import Constant, Fade, FadingContext, FadingStrategy, NoFading
@@ -18,6 +19,8 @@ from .smoother import SmoothedTrack, rts_smooth
 from .upf import PartialUPF
 
 __all__ = [
+    "FilterBase",
+    "CompiledPath",
     "KalmanFilter",
     "ExtendedKalmanFilter",
     "UnscentedKalmanFilter",

@@ -63,7 +63,8 @@ from ..models.maneuver import (
     exp_correlated_transition,
 )
 from ..rng import RNGLike
-from .gating import chi2_gate_thresholds
+from .base import FilterBase, as_gaussian, prior_batch
+from .gating import gate_exceeded
 from .gaussian import linear_update
 
 __all__ = [
@@ -147,13 +148,17 @@ def _t(A: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class _AxisFilter:
-    """Shared machinery: axis layout from the measurement model, split and join, info."""
+class _AxisFilter(FilterBase):
+    """Shared machinery: axis layout from the measurement model, split and join, info.
+
+    NumPy only: ``backend="numba"`` warns and computes with NumPy.
+    """
 
     measurement: Any
     dt: float = 1.0
-    name: str = ""
     gate: float | None = field(default=None, kw_only=True)
+
+    warn_on_default_backend = False  # no compiled path at all: a process-wide numba default is not a request
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "dt", positive("dt", self.dt))
@@ -186,11 +191,7 @@ class _AxisFilter:
             )
         self._check_R(np.asarray(self.measurement.cov(None), dtype=float))
         object.__setattr__(self, "_idx", idx)
-        if not self.name:
-            object.__setattr__(self, "name", self._default_name())
-
-    def _default_name(self) -> str:
-        return type(self).__name__
+        super().__post_init__()
 
     @staticmethod
     def _check_R(R: np.ndarray) -> np.ndarray:
@@ -227,11 +228,8 @@ class _AxisFilter:
     # -- protocol -------------------------------------------------------------
     def init(self, prior: Gaussian, batch: tuple[int, ...] = (), rng: RNGLike = None) -> AxisState:
         """Initial state from a Gaussian prior; covariances between axes are ignored."""
-        if not isinstance(prior, Gaussian):
-            prior = Gaussian(*prior)
-        batch = tuple(batch)
-        if prior.mean.ndim > 1 and not batch:
-            batch = prior.mean.shape[:-1]
+        prior = as_gaussian(prior)
+        batch = prior_batch(prior, batch)
         if prior.dim != self._idx.size:
             raise ValueError(f"prior: state dimension {prior.dim} does not match the measurement's {self._idx.size}")
         mean, cov = prior.broadcast(batch)
@@ -258,9 +256,8 @@ class _AxisFilter:
         info = _combine_axes(ainfo, batch)
         gated = np.zeros(batch, dtype=bool)
         if self.gate is not None:
-            thresholds = chi2_gate_thresholds(self.gate, self.axes)
-            gated = np.asarray(info["nis"] > thresholds[info["dof"]])  # NaN NIS (nothing measured) is never gated
-            if gated.any():
+            gated = gate_exceeded(self.gate, info["nis"], info["dof"], self.axes)
+            if gated.any():  # the prediction, in the axes' layout
                 x_upd = np.where(gated[..., None, None], pred.mean, x_upd)
                 P_upd = np.where(gated[..., None, None, None], pred.cov, P_upd)
         memory = self._learn(pred.memory, x, pred.mean, x_upd, measured & ~gated[..., None], T)
@@ -376,11 +373,13 @@ class CurrentStatisticalFilter(_AxisFilter):
         ``"current"``: ā = â(k|k) (the CS model); ``"zero"``: ā = 0 (a
         Singer filter with the CS variance).
     name
-        Label in results.
+        Label in results (keyword only).
     gate
         χ² gate probability in (0, 1), keyword only: a step whose NIS
         exceeds the χ²(dof) quantile ``gate`` only predicts and is flagged
         in ``gated`` (see the module notes).  Default: no gate.
+    backend
+        Keyword only; NumPy only (``"numba"`` warns and computes with NumPy).
     """
 
     alpha: float = 0.001
@@ -435,7 +434,7 @@ class AdaptiveCSFilter(_AxisFilter):
 
     Parameters
     ----------
-    measurement, dt, name, gate
+    measurement, dt, name, gate, backend
         As :class:`CurrentStatisticalFilter`.
     alpha0
         Maneuver frequency without a maneuver (paper: 0.001 1/s).
@@ -544,6 +543,10 @@ class AdaptiveCSFilter(_AxisFilter):
         V = np.where(measured, V, V_old)
 
         ratio = np.where(detect, D / self.threshold, 1.0)
+        # The scalar STF of paper P4, per axis and only on detection.  Not
+        # fading_adaptive.StrongTracking: that one averages as (1 − d)V + dν² (other
+        # rounding than (ρV + ν²)/(1 + ρ) above) and bounds λ by λ_max and the
+        # conditioning ceiling, so sharing it would change APCS's results.
         if self.fading == "stf":
             N = V - Q0[..., 0, 0] - self.beta_s * r
             lam = np.where(detect, np.maximum(1.0, N / FPFt0[..., 0, 0]), 1.0)
@@ -596,7 +599,7 @@ class ModifiedSingerFilter(_AxisFilter):
 
     Parameters
     ----------
-    measurement, dt, name, gate
+    measurement, dt, name, gate, backend
         As :class:`CurrentStatisticalFilter`.
     alpha_init, sigma_init
         Singer parameters before the estimates are used (1/s, m/s²).

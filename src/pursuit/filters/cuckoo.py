@@ -77,7 +77,7 @@ from .particle import (
     Weighed,
     _exp_shifted,
     _prepare_measurement,
-    _propagate,
+    propagate_particles,
     weighted_moments,
 )
 
@@ -376,7 +376,7 @@ class CuckooParticleFilter(ParticleFilterBase):
 
     Parameters
     ----------
-    motion, measurement, particles, resampler, name
+    motion, measurement, particles, resampler, name, backend
         See :class:`pursuit.filters.particle.ParticleFilterBase`.
     ess_threshold
         Resample when ESS < ``ess_threshold``·N (None: every step); used
@@ -404,6 +404,8 @@ class CuckooParticleFilter(ParticleFilterBase):
     weight_mode: str = "reset"
     estimate: str = "mean"
 
+    compiled_path = "particle:CUCKOO"
+
     def __post_init__(self) -> None:
         super().__post_init__()
         if not isinstance(self.search, CuckooSearch):
@@ -430,13 +432,11 @@ class CuckooParticleFilter(ParticleFilterBase):
         dt = time_step(dt, k)
         z = _prepare_measurement(z, state.batch, k, self.measurement)
         if self._compiled_batch(state):
-            from .._compiled.particle import cuckoo_step
-
-            return cuckoo_step(self, self._specs, state, z, k, dt)
+            return self._compiled_step(state, z, k, dt)
         rng = state.rng
         work = state.work
         N = self.particles
-        X = _propagate(self.motion, state.particles, k, dt, rng)
+        X = propagate_particles(self.motion, state.particles, k, dt, rng)
         sequential = self.weight_mode == "sequential"
         log_prior = state.logw if sequential and not state.uniform else None
         # predictive statistics and likelihood increment from the propagated particles

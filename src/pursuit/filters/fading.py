@@ -34,11 +34,17 @@ from typing import Any, Callable, Mapping, Protocol
 import numpy as np
 
 from .._validation import in_range
+from .jacobians import measurement_jacobian
 
 __all__ = ["Fade", "FadingContext", "FadingStrategy", "Constant", "NoFading", "CONDITION_LIMIT"]
 
 CONDITION_LIMIT = 1.0 / np.sqrt(np.finfo(float).eps)
 """κ ≈ 6.7e7: the adaptive strategies keep λ·tr(H P̄ Hᵀ) ≤ κ·tr(R) (see :attr:`FadingContext.lam_ceiling`)."""
+
+
+def diag_sandwich(H: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """Diagonal of ``H A Hᵀ``: ``(*b, m, n), (*b, n, n) -> (*b, m)`` (either may be unbatched)."""
+    return np.einsum("...ij,...jk,...ik->...i", H, A, H)
 
 
 @dataclass(frozen=True)
@@ -122,8 +128,6 @@ class FadingContext:
     @cached_property
     def jacobian(self) -> np.ndarray:
         """H_k = ∂h/∂x at x̂⁻_k: ``(m, n)`` or ``(*batch, m, n)``."""
-        from .gaussian import measurement_jacobian
-
         return measurement_jacobian(self.measurement, self.pred_mean, self.k)
 
     @cached_property
@@ -158,8 +162,6 @@ class FadingContext:
         the target or after a short step that follows a long one (measured:
         λ up to 1e10 for STF, position variance 1e12 m² against R = 1e-6 m²).
         """
-        from .fading_adaptive import diag_sandwich
-
         batch = self.z.shape[:-1]
         tr_r = np.broadcast_to(np.trace(self.measurement_cov, axis1=-2, axis2=-1), batch)
         tr_m = np.broadcast_to(diag_sandwich(self.linearization, self.propagated_cov).sum(axis=-1), batch)

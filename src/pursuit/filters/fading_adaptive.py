@@ -41,17 +41,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._validation import in_range
-from .fading import Fade, FadingContext
+from .fading import Fade, FadingContext, diag_sandwich
 
 __all__ = ["ExponentiallyWeighted", "StrongTracking", "TraceMemory", "diag_sandwich", "LAM_MAX"]
 
 LAM_MAX = 1.0e4
 """Default upper bound on λ of the adaptive strategies (EWFMKF, STF, IFMKF): the λ_max of docs/spec/03-fading-memory-ekf.md §4.4."""
-
-
-def diag_sandwich(H: np.ndarray, A: np.ndarray) -> np.ndarray:
-    """Diagonal of ``H A Hᵀ``: ``(*b, m, n), (*b, n, n) -> (*b, m)`` (either may be unbatched)."""
-    return np.einsum("...ij,...jk,...ik->...i", H, A, H)
 
 
 @dataclass(frozen=True)

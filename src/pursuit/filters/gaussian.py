@@ -67,13 +67,14 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, mv, numerical_jacobian, quad, symmetrize
-from .._validation import in_range, measurement_for_step, model_dim, no_infinite_measurements, nonnegative, prior_of_size, time_step
-from ..compute import fallback_warning, resolve_backend
+from .._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, mv, quad, symmetrize
+from .._validation import in_range, measurement_for_step, model_dim, nonnegative, prior_of_size, time_step
 from ..gaussian import Gaussian
 from ..rng import RNGLike
+from .base import FilterBase, as_gaussian, prior_batch
 from .fading import Constant, FadingContext, FadingStrategy, NoFading
-from .gating import chi2_gate_thresholds
+from .gating import apply_gate, keep_prediction
+from .jacobians import call_with_dt, measurement_jacobian, motion_jacobian
 
 __all__ = [
     "GaussianState",
@@ -123,26 +124,6 @@ class GaussianState:
 # --------------------------------------------------------------------------
 # model helpers
 # --------------------------------------------------------------------------
-def _call(fn, *args, dt=None):
-    return fn(*args) if dt is None else fn(*args, dt=dt)
-
-
-def motion_jacobian(motion: Any, x: np.ndarray, k: int, dt: float | None = None) -> np.ndarray:
-    """∂f/∂x at ``x``: the model's own Jacobian, else central differences."""
-    jac = getattr(motion, "jacobian", None)
-    if jac is not None:
-        return np.asarray(_call(jac, x, k, dt=dt), dtype=float)
-    return numerical_jacobian(lambda xs: _call(motion.f, xs, k, dt=dt), x)
-
-
-def measurement_jacobian(measurement: Any, x: np.ndarray, k: int) -> np.ndarray:
-    """∂h/∂x at ``x``: the model's own Jacobian, else central differences (through its ``residual``, if any)."""
-    jac = getattr(measurement, "jacobian", None)
-    if jac is not None:
-        return np.asarray(jac(x, k), dtype=float)
-    return numerical_jacobian(lambda xs: measurement.h(xs, k), x, residual=getattr(measurement, "residual", None))
-
-
 def _residual(measurement: Any, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     res = getattr(measurement, "residual", None)
     return res(a, b) if res is not None else a - b
@@ -240,66 +221,29 @@ class _Measured:
 
 
 @dataclass(frozen=True)
-class _GaussianFilter:
+class _GaussianFilter(FilterBase):
     """Shared predict-fade-update cycle; subclasses give the two transforms."""
 
     motion: Any
     measurement: Any
     fading: FadingStrategy = NoFading
-    name: str = ""
     gate: float | None = field(default=None, kw_only=True)
-    backend: str | None = None
-    _specs: Any = field(init=False, repr=False, compare=False, default=None)
 
-    _compiled_kind = ""  # "ekf" or "sigma" for the classes with a compiled step
+    motion_needs = ("f", "cov")
+    measurement_needs = ("h", "cov")
+    need_linear_motion = True  # the compiled Gaussian filters propagate with F
 
     def __post_init__(self) -> None:
         if self.gate is not None:
             in_range("gate", self.gate, 0.0, 1.0, low_open=True, high_open=True)
-        for attr in ("f", "cov"):
-            if not callable(getattr(self.motion, attr, None)):
-                raise TypeError(f"motion model {type(self.motion).__name__} has no method {attr}()")
-        for attr in ("h", "cov"):
-            if not callable(getattr(self.measurement, attr, None)):
-                raise TypeError(f"measurement model {type(self.measurement).__name__} has no method {attr}()")
         if isinstance(self.fading, (int, float)):
             object.__setattr__(self, "fading", Constant(float(self.fading)))
-        if not self.name:
-            object.__setattr__(self, "name", self._default_name())
-        self._select_backend()
+        super().__post_init__()
 
-    def _default_name(self) -> str:
-        return type(self).__name__
-
-    # -- compute backend ----------------------------------------------------
-    def _select_backend(self) -> None:
-        """Resolve ``backend``; for ``"numba"`` find the compiled form of the models or warn and use NumPy."""
-        object.__setattr__(self, "backend", resolve_backend(self.backend))
-        object.__setattr__(self, "_specs", None)
-        if self.backend != "numba":
-            return
-        from .._compiled.specs import LINEAR, model_specs
-
-        if not self._compiled_kind:
-            reason = type(self).__name__
-        elif type(self.fading) is not Constant:
-            reason = f"the fading strategy {type(self.fading).__name__} (compiled: a constant factor)"
-        else:
-            specs = model_specs(self.motion, self.measurement, need_diagonal=False)
-            if isinstance(specs, str):
-                reason = specs
-            elif specs[0].kind != LINEAR:
-                reason = f"motion model {type(self.motion).__name__} in a Gaussian filter (compiled: linear motion)"
-            else:
-                reason = None
-                object.__setattr__(self, "_specs", specs)
-        if reason is not None:
-            fallback_warning(self, reason)
-
-    @property
-    def compiled(self) -> bool:
-        """Whether steps run compiled (``backend="numba"`` with supported models and fading)."""
-        return self._specs is not None
+    def _compiled_unsupported(self) -> str | None:
+        if self.compiled_path and type(self.fading) is not Constant:
+            return f"the fading strategy {type(self.fading).__name__} (compiled: a constant factor)"
+        return super()._compiled_unsupported()
 
     def _measurement_dim(self) -> int:
         """m: the measurement model's ``dim``, else the size of its noise covariance (a user's model need not say)."""
@@ -313,11 +257,8 @@ class _GaussianFilter:
         ``rng`` is accepted for a uniform interface; Gaussian filters draw
         nothing.
         """
-        if not isinstance(prior, Gaussian):
-            prior = Gaussian(*prior)
-        batch = tuple(batch)
-        if prior.mean.ndim > 1 and not batch:
-            batch = prior.mean.shape[:-1]
+        prior = as_gaussian(prior)
+        batch = prior_batch(prior, batch)
         prior_of_size(prior.dim, model_dim(self.motion), self.motion)
         check_prior_against_noise(self.measurement, prior.mean, prior.cov)
         mean, cov = prior.broadcast(batch)
@@ -345,37 +286,17 @@ class _GaussianFilter:
         batch = state.batch
         z = measurement_for_step(z, batch, self._measurement_dim(), k)
         if self._specs is not None and len(batch) <= 1:
-            from .._compiled.gaussian import gaussian_step
+            return self._compiled_step(state, z, k, dt)
+        return self.numpy_step(state, z, k, dt)
 
-            return gaussian_step(self, self._specs, state, z, k, dt, self._compiled_kind)
-        return self._step_numpy(state, z, k, dt)
+    def numpy_step(
+        self, state: GaussianState, z: np.ndarray, k: int, dt: float | None
+    ) -> tuple[GaussianState, dict[str, np.ndarray]]:
+        """The NumPy step, whatever the backend (``z`` already checked and broadcast to ``(*batch, m)``).
 
-    def run_sequence(
-        self, state: GaussianState, zs: np.ndarray, *, keep_cov: bool = True
-    ) -> tuple[np.ndarray, np.ndarray | None, dict[str, np.ndarray]] | None:
-        """All steps of ``zs (K, *batch, m)`` in one compiled call, or ``None`` where that does not apply.
-
-        :func:`pursuit.run` asks this first.  It applies to the compiled
-        KF/EKF with a time-invariant linear motion model, no gate and one
-        batch axis, from a state at step 0; it gives the same bits as
-        calling :meth:`step` K times.  Returns ``(means, covs, info)`` with
-        time first (``covs`` is ``None`` unless ``keep_cov``).  A subclass
-        that overrides :meth:`step` is stepped from Python.
+        :meth:`step` calls it unless the step runs compiled; the compiled
+        step calls it for the runs whose covariance needs a repair.
         """
-        if type(self).step is not _GaussianFilter.step:  # a subclass's own step runs from Python
-            return None
-        if self._specs is None or self._compiled_kind != "ekf" or state.k != 0:
-            return None
-        zs = np.asarray(zs, dtype=float)
-        if zs.ndim != 3 or zs.shape[1:-1] != state.batch or zs.shape[-1] != self._specs[1].dim:
-            return None  # the step path broadcasts or reports the shape
-        no_infinite_measurements(zs)
-        from .._compiled.gaussian import gaussian_sequence
-
-        return gaussian_sequence(self, self._specs, state, zs, keep_cov)
-
-    def _step_numpy(self, state: GaussianState, z: np.ndarray, k: int, dt: float | None):
-        """The NumPy step (``z`` already checked and broadcast)."""
         batch = state.batch
         P = _core(state.cov)
         pred = self._predict(state.mean, P, k, dt)
@@ -398,10 +319,10 @@ class _GaussianFilter:
         if fade.skip is not None:
             # The strategy's own gate: those runs keep the prediction, while the
             # info still describes the measurement they rejected (as for `gate`).
-            mean, cov = _keep_prediction(np.asarray(fade.skip, dtype=bool), pred.mean, P_pred, mean, cov)
+            mean, cov = keep_prediction(np.asarray(fade.skip, dtype=bool), pred.mean, P_pred, mean, cov)
         gated = np.zeros(batch, dtype=bool)
         if self.gate is not None:
-            mean, cov, gated = _apply_gate(self.gate, info, pred.mean, P_pred, mean, cov)
+            mean, cov, gated = apply_gate(self.gate, info, pred.mean, P_pred, mean, cov)
 
         if cov.ndim == 2 and batch:
             cov = np.broadcast_to(cov, (*batch, *cov.shape))
@@ -440,29 +361,6 @@ def _scale(lam: np.ndarray, P: np.ndarray) -> np.ndarray:
     if lam.ndim == 0:
         return P if lam == 1.0 else lam * P
     return lam[..., None, None] * P
-
-
-def _apply_gate(gate, info, x_pred, P_pred, mean, cov):
-    """Keep the prediction where NIS exceeds the χ²(dof) quantile ``gate``."""
-    nis, dof = info["nis"], info["dof"]
-    thresholds = chi2_gate_thresholds(gate, info["innovation"].shape[-1])
-    gated = np.asarray(nis > thresholds[dof])  # NaN NIS (nothing measured) is never gated
-    mean, cov = _keep_prediction(gated, x_pred, P_pred, mean, cov)
-    return mean, cov, gated
-
-
-def _keep_prediction(mask, x_pred, P_pred, mean, cov):
-    """The predicted mean and covariance where ``mask`` (``(*b,)``) is True, the update elsewhere.
-
-    The kept covariance is symmetrised like every updated one (F P Fᵀ is
-    symmetric only to round-off).
-    """
-    if not mask.any():
-        return mean, cov
-    n = mean.shape[-1]
-    mean = np.where(mask[..., None], x_pred, mean)
-    cov = np.where(mask[..., None, None], np.broadcast_to(symmetrize(P_pred), (*mask.shape, n, n)), cov)
-    return mean, cov
 
 
 def _any_repaired(batch, *flags) -> np.ndarray:
@@ -604,25 +502,27 @@ class ExtendedKalmanFilter(_GaussianFilter):
         methods are replaced by central differences.
     fading
         Fading strategy for the predict step, or a number (constant λ).
+    gate
+        χ² gate probability in (0, 1), keyword only (default: no gate).
     name
-        Label used in results and reports.
+        Label used in results and reports (keyword only).
     backend
-        Compute backend: ``"numpy"``, ``"numba"`` (compiled, for linear
-        motion models, the built-in measurement models and a constant fading
-        factor; see :mod:`pursuit.compute`) or ``None`` for the process
-        default.  Not the Monte Carlo engine's execution backend.
+        Compute backend, keyword only: ``"numpy"``, ``"numba"`` (compiled,
+        for linear motion models, the built-in measurement models and a
+        constant fading factor; see :mod:`pursuit.compute`) or ``None`` for
+        the process default.  Not the Monte Carlo engine's execution backend.
     """
 
-    _compiled_kind = "ekf"
+    compiled_path = "gaussian:EKF"
 
     def _default_name(self) -> str:
         return "EKF"
 
     def _predict(self, x, P, k, dt):
         F = motion_jacobian(self.motion, x, k, dt)
-        mean = np.asarray(_call(self.motion.f, x, k, dt=dt), dtype=float)
+        mean = np.asarray(call_with_dt(self.motion.f, x, k, dt=dt), dtype=float)
         PFt = P @ _t(F)
-        return _Prediction(mean, F @ PFt, np.asarray(_call(self.motion.cov, k, dt=dt), dtype=float), PFt)
+        return _Prediction(mean, F @ PFt, np.asarray(call_with_dt(self.motion.cov, k, dt=dt), dtype=float), PFt)
 
     def _measure(self, x_pred, P_pred, k):
         H = measurement_jacobian(self.measurement, x_pred, k)
@@ -659,9 +559,9 @@ class KalmanFilter(ExtendedKalmanFilter):
         return "KF"
 
     def _predict(self, x, P, k, dt):
-        F = np.asarray(_call(self.motion.transition_matrix, k, dt=dt), dtype=float)
+        F = np.asarray(call_with_dt(self.motion.transition_matrix, k, dt=dt), dtype=float)
         PFt = P @ F.T
-        return _Prediction(mv(F, x), F @ PFt, np.asarray(_call(self.motion.cov, k, dt=dt), dtype=float), PFt)
+        return _Prediction(mv(F, x), F @ PFt, np.asarray(call_with_dt(self.motion.cov, k, dt=dt), dtype=float), PFt)
 
     def _measure(self, x_pred, P_pred, k):
         H = np.asarray(self.measurement.matrix(k), dtype=float)
@@ -674,10 +574,14 @@ class KalmanFilter(ExtendedKalmanFilter):
 # --------------------------------------------------------------------------
 @dataclass(frozen=True)
 class _SigmaPointFilter(_GaussianFilter):
-    _compiled_kind = "sigma"
+    compiled_path = "gaussian:SIGMA"
 
-    def _weights(self, n: int) -> tuple[float, np.ndarray, np.ndarray]:
-        """Point scale c and mean / covariance weights; points are x and x ± c·(columns of chol P)."""
+    def sigma_weights(self, n: int) -> tuple[float, np.ndarray, np.ndarray]:
+        """Point scale c and mean / covariance weights ``(c, wm, wc)`` for an n-dimensional state.
+
+        The points are x and x ± c·(columns of chol P), the centre first
+        when the count is odd; the compiled step draws the same points.
+        """
         raise NotImplementedError
 
     def _points(self, x, P):
@@ -687,7 +591,7 @@ class _SigmaPointFilter(_GaussianFilter):
     def _factored_points(self, x, P):
         """Sigma points and weights, with the Cholesky factor L and the unit points ξ (χ_p = x + L ξ_p)."""
         n = x.shape[-1]
-        scale, wm, wc = self._weights(n)
+        scale, wm, wc = self.sigma_weights(n)
         L, repaired = cholesky_psd(P)
         cols = scale * np.swapaxes(L, -1, -2)  # row j = scale * column j of L
         cols = np.broadcast_to(cols, (*x.shape[:-1], *cols.shape[-2:]))
@@ -701,13 +605,13 @@ class _SigmaPointFilter(_GaussianFilter):
 
     def _predict(self, x, P, k, dt):
         chi, wm, wc, repaired = self._points(x, P)
-        Y = np.asarray(_call(self.motion.f, chi, k, dt=dt), dtype=float)
+        Y = np.asarray(call_with_dt(self.motion.f, chi, k, dt=dt), dtype=float)
         mean = np.matmul(wm, Y)
         dY = Y - mean[..., None, :]
         dX = chi - x[..., None, :]
         propagated = symmetrize(_t(dY * wc[:, None]) @ dY)
         cross = _t(dX * wc[:, None]) @ dY
-        Q = np.asarray(_call(self.motion.cov, k, dt=dt), dtype=float)
+        Q = np.asarray(call_with_dt(self.motion.cov, k, dt=dt), dtype=float)
         return _Prediction(mean, propagated, Q, cross, repaired)
 
     def _measure(self, x_pred, P_pred, k):
@@ -745,7 +649,7 @@ class UnscentedKalmanFilter(_SigmaPointFilter):
 
     Parameters
     ----------
-    motion, measurement, fading, name
+    motion, measurement, fading, gate, name, backend
         As :class:`ExtendedKalmanFilter`.
     alpha, beta, kappa
         Sigma-point spread, prior-knowledge and secondary scaling parameters
@@ -771,7 +675,7 @@ class UnscentedKalmanFilter(_SigmaPointFilter):
         in_range("alpha", self.alpha, 0.0, 1.0e3, low_open=True)
         nonnegative("beta", self.beta)
         in_range("kappa", self.kappa, -1.0e6, 1.0e6)
-        n = getattr(self.motion, "dim", None)  # a user's model may not say; _weights checks again
+        n = getattr(self.motion, "dim", None)  # a user's model may not say; sigma_weights checks again
         if isinstance(n, (int, np.integer)) and not n + self.kappa > 0:
             raise ValueError(
                 f"kappa: must exceed -n = {-n} for the {n}-dimensional state (n + kappa > 0 keeps the sigma points real), got {self.kappa!r}"
@@ -780,7 +684,7 @@ class UnscentedKalmanFilter(_SigmaPointFilter):
     def _default_name(self) -> str:
         return "UKF"
 
-    def _weights(self, n):
+    def sigma_weights(self, n):
         lam = self.alpha**2 * (n + self.kappa) - n
         c = n + lam
         if c <= 0:
@@ -802,6 +706,6 @@ class CubatureKalmanFilter(_SigmaPointFilter):
     def _default_name(self) -> str:
         return "CKF"
 
-    def _weights(self, n):
+    def sigma_weights(self, n):
         w = np.full(2 * n, 0.5 / n)
         return np.sqrt(n), w, w

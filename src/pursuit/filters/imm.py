@@ -55,7 +55,8 @@ from .._linalg import inv_spd, logdet_spd, quad, symmetrize
 from .._validation import in_range, time_step
 from ..gaussian import Gaussian
 from ..rng import RNGLike
-from .gating import chi2_gate_thresholds
+from .base import FilterBase, as_gaussian, prior_batch
+from .gating import gate_exceeded
 
 __all__ = ["StateMap", "IMMState", "InteractingMultipleModel", "kinematic_map"]
 
@@ -181,7 +182,7 @@ def _check_transition(P: np.ndarray, r: int) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class InteractingMultipleModel:
+class InteractingMultipleModel(FilterBase):
     """IMM filter.
 
     Parameters
@@ -199,19 +200,23 @@ class InteractingMultipleModel:
         One :class:`StateMap` (or None for the identity) per filter; default
         all identity (every mode has the common state).
     name
-        Label in results.
+        Label in results (keyword only; default ``"IMM"``).
     gate
         χ² gate probability in (0, 1), keyword only: a measurement outside
         every mode's gate is not used (see the module notes) and the step
         is flagged in ``gated``.  Default: no gate.
+    backend
+        Keyword only; the IMM itself computes with NumPy (``"numba"`` warns),
+        its mode filters each with their own backend.
     """
 
     filters: Sequence[Any]
     transition: Any = 0.95
     initial_probs: Any = None
     maps: Sequence[StateMap | None] | None = None
-    name: str = "IMM"
     gate: float | None = field(default=None, kw_only=True)
+
+    warn_on_default_backend = False  # no compiled path at all: a process-wide numba default is not a request
 
     def __post_init__(self) -> None:
         filters = tuple(self.filters)
@@ -242,10 +247,12 @@ class InteractingMultipleModel:
         if len(dims) > 1:
             raise ValueError(f"maps: all maps must target the same common dimension, got {sorted(dims)}")
         object.__setattr__(self, "maps", maps)
-        if not self.name:
-            object.__setattr__(self, "name", "IMM")
         if self.gate is not None:
             object.__setattr__(self, "gate", in_range("gate", self.gate, 0.0, 1.0, low_open=True, high_open=True))
+        super().__post_init__()
+
+    def _default_name(self) -> str:
+        return "IMM"
 
     @property
     def modes(self) -> int:
@@ -273,11 +280,8 @@ class InteractingMultipleModel:
     # -- protocol ---------------------------------------------------------------
     def init(self, prior: Gaussian, batch: tuple[int, ...] = (), rng: RNGLike = None) -> IMMState:
         """Every mode starts from the prior (its marginal for smaller modes); μ = initial_probs."""
-        if not isinstance(prior, Gaussian):
-            prior = Gaussian(*prior)
-        batch = tuple(batch)
-        if prior.mean.ndim > 1 and not batch:
-            batch = prior.mean.shape[:-1]
+        prior = as_gaussian(prior)
+        batch = prior_batch(prior, batch)
         mean, cov = prior.broadcast(batch)
         for j, m in enumerate(self.maps):
             if m is not None and m.dim != prior.dim:
@@ -324,8 +328,7 @@ class InteractingMultipleModel:
         if self.gate is not None:
             dof = np.broadcast_to(infos[0]["dof"], batch)  # the same measured components in every mode
             m = np.shape(infos[0]["innovation"])[-1]
-            limit = chi2_gate_thresholds(self.gate, m)[dof]
-            gated = np.all(mode_nis > limit[..., None], axis=-1)  # NaN NIS (nothing measured) is never gated
+            gated = np.all(gate_exceeded(self.gate, mode_nis, dof[..., None], m), axis=-1)
             if gated.any():
                 zb = np.broadcast_to(np.asarray(z, dtype=float), (*batch, m))
                 new_states, kept = self._step_modes(mixed, np.where(gated[..., None], np.nan, zb), k, dt)

@@ -66,13 +66,13 @@ from typing import Any
 import numpy as np
 
 from .._linalg import inv_spd, quad, symmetrize
-from .._validation import in_range, measurement_for_step, model_dim, no_infinite_measurements, positive_int, prior_of_size, time_step
-from ..compute import fallback_warning, resolve_backend
+from .._validation import in_range, measurement_for_step, model_dim, positive_int, prior_of_size, time_step
 from ..gaussian import Gaussian
 from ..models.measurement import _GaussianNoise, gaussian_loglik
 from ..rng import RNGLike, RunStreams, as_rng
-from ._workspace import Workspace, scratch
+from .base import FilterBase, prior_batch
 from .resample import get_resampler, repeat_particles
+from .workspace import Workspace, scratch
 
 __all__ = [
     "ParticleState",
@@ -82,6 +82,7 @@ __all__ = [
     "SIR",
     "weighted_moments",
     "rows_rng",
+    "propagate_particles",
 ]
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
@@ -113,7 +114,7 @@ class ParticleState:
         Filter-specific memory.
     work
         Scratch buffers reused by the next step (see
-        :mod:`pursuit.filters._workspace`).
+        :mod:`pursuit.filters.workspace`).
     """
 
     particles: np.ndarray
@@ -301,7 +302,7 @@ def _exp_shifted(
 # the shared particle-filter machinery
 # --------------------------------------------------------------------------
 @dataclass(frozen=True)
-class ParticleFilterBase:
+class ParticleFilterBase(FilterBase):
     """What every particle filter shares: prior sampling, weighing, moments, resampling.
 
     Parameters
@@ -319,11 +320,11 @@ class ParticleFilterBase:
         ``None``: resample at every step (classic SIR, paper P1's PF); a
         number r in [0, 1]: resample when ESS < r·N (0 = never).
     name
-        Label used in results.
+        Label used in results (keyword only).
     backend
-        Compute backend: ``"numpy"``, ``"numba"`` (compiled, for the
-        built-in models; see :mod:`pursuit.compute`) or ``None`` for the
-        process default.  Not the Monte Carlo engine's execution backend.
+        Compute backend, keyword only: ``"numpy"``, ``"numba"`` (compiled,
+        for the built-in models; see :mod:`pursuit.compute`) or ``None`` for
+        the process default.  Not the Monte Carlo engine's execution backend.
     """
 
     motion: Any
@@ -331,19 +332,14 @@ class ParticleFilterBase:
     particles: int = 1000
     resampler: str = "systematic"
     ess_threshold: float | None = None
-    name: str = ""
-    backend: str | None = None
     _stock: bool = field(init=False, repr=False, compare=False, default=False)
     _plain_residual: bool = field(init=False, repr=False, compare=False, default=True)
-    _specs: Any = field(init=False, repr=False, compare=False, default=None)
+
+    motion_needs = ("sample", "f", "cov")
+    measurement_needs = ("h", "cov", "loglik")
+    need_diagonal_noise = True  # the compiled likelihood sums per component
 
     def __post_init__(self) -> None:
-        for attr in ("sample", "f", "cov"):
-            if not callable(getattr(self.motion, attr, None)):
-                raise TypeError(f"motion model {type(self.motion).__name__} has no method {attr}()")
-        for attr in ("h", "cov", "loglik"):
-            if not callable(getattr(self.measurement, attr, None)):
-                raise TypeError(f"measurement model {type(self.measurement).__name__} has no method {attr}()")
         object.__setattr__(self, "particles", positive_int("particles", self.particles))
         get_resampler(self.resampler)
         if self.ess_threshold is not None:
@@ -354,40 +350,11 @@ class ParticleFilterBase:
         object.__setattr__(
             self, "_stock", getattr(cls, "loglik", None) is _GaussianNoise.loglik and self._plain_residual
         )
-        if not self.name:
-            object.__setattr__(self, "name", self._default_name())
-        self._select_backend()
-
-    def _default_name(self) -> str:
-        return type(self).__name__
+        super().__post_init__()
 
     # -- compute backend -----------------------------------------------------
-    def _select_backend(self) -> None:
-        """Resolve ``backend`` and, for ``"numba"``, find the compiled form of the models (or warn and use NumPy)."""
-        object.__setattr__(self, "backend", resolve_backend(self.backend))
-        object.__setattr__(self, "_specs", None)
-        if self.backend != "numba":
-            return
-        reason = self._compiled_unsupported()
-        if reason is None:
-            from .._compiled.specs import model_specs
-
-            specs = model_specs(self.motion, self.measurement, need_diagonal=True)
-            if isinstance(specs, str):
-                reason = specs
-            else:
-                object.__setattr__(self, "_specs", specs)
-        if reason is not None:
-            fallback_warning(self, reason)
-
-    def _compiled_unsupported(self) -> str | None:
-        """Why this filter (not its models) has no compiled path; None when it has one."""
-        return f"{type(self).__name__}"
-
-    @property
-    def compiled(self) -> bool:
-        """Whether steps run compiled (``backend="numba"`` with supported models)."""
-        return self._specs is not None
+    def _sequence_applies(self, state: ParticleState) -> bool:
+        return self._compiled_batch(state) and state.k == 0 and state.particles.ndim == 3
 
     def _compiled_batch(self, state: ParticleState) -> bool:
         """Compiled steps handle one batch axis with RunStreams (any batch shape with one Generator)."""
@@ -410,9 +377,7 @@ class ParticleFilterBase:
             for every later draw.
         """
         rng = as_rng(rng)
-        batch = tuple(batch)
-        if not batch and isinstance(prior, Gaussian) and prior.mean.ndim > 1:
-            batch = prior.mean.shape[:-1]
+        batch = prior_batch(prior, batch)
         X, mean, cov = _sample_prior(prior, batch, self.particles, rng)
         prior_of_size(X.shape[-1], model_dim(self.motion), self.motion)
         logw = np.broadcast_to(-np.log(self.particles), (*batch, self.particles))
@@ -653,7 +618,7 @@ class BootstrapParticleFilter(ParticleFilterBase):
 
     Parameters
     ----------
-    motion, measurement, particles, resampler, ess_threshold, name
+    motion, measurement, particles, resampler, ess_threshold, name, backend
         See :class:`ParticleFilterBase`.
 
     Notes
@@ -663,11 +628,10 @@ class BootstrapParticleFilter(ParticleFilterBase):
     the step info.
     """
 
+    compiled_path = "particle:BOOTSTRAP"
+
     def _default_name(self) -> str:
         return "PF"
-
-    def _compiled_unsupported(self) -> str | None:
-        return None
 
     def step(
         self, state: ParticleState, z: np.ndarray, k: int | None = None, dt: float | None = None
@@ -689,11 +653,9 @@ class BootstrapParticleFilter(ParticleFilterBase):
         dt = time_step(dt, k)
         z = _prepare_measurement(z, state.batch, k, self.measurement)
         if self._compiled_batch(state):
-            from .._compiled.particle import bootstrap_step
-
-            return bootstrap_step(self, self._specs, state, z, k, dt)
+            return self._compiled_step(state, z, k, dt)
         rng = state.rng
-        X = _propagate(self.motion, state.particles, k, dt, rng)
+        X = propagate_particles(self.motion, state.particles, k, dt, rng)
         work = state.work
         weighed = self.weigh(X, z, k, None if state.uniform else state.logw, work=work)
         mean, cov = weighted_moments(X, weighed.e, weighed.s, work)
@@ -705,38 +667,16 @@ class BootstrapParticleFilter(ParticleFilterBase):
         info["resampled"] = need
         return ParticleState(X, logw, mean, cov, rng, k, uniform, work=work), info
 
-    def run_sequence(
-        self, state: ParticleState, zs: np.ndarray, *, keep_cov: bool = True
-    ) -> tuple[np.ndarray, np.ndarray | None, dict[str, np.ndarray]] | None:
-        """All steps of ``zs (K, *batch, m)`` in one compiled call, or ``None`` where that does not apply.
-
-        :func:`pursuit.run` asks this first.  It applies to the compiled
-        filter with one batch axis and a :class:`pursuit.RunStreams` of
-        PCG64 streams (each run draws from its own), from a state at step 0;
-        it gives the same bits as calling :meth:`step` K times, and leaves
-        the streams where those steps would.  Returns ``(means, covs, info)``
-        with time first (``covs`` is ``None`` unless ``keep_cov``).  A
-        subclass that overrides :meth:`step` is stepped from Python.
-        """
-        if type(self).step is not BootstrapParticleFilter.step:
-            return None
-        if not self._compiled_batch(state) or state.k != 0 or state.particles.ndim != 3:
-            return None
-        zs = np.asarray(zs, dtype=float)
-        if zs.ndim != 3 or zs.shape[1:-1] != state.batch or zs.shape[-1] != self._specs[1].dim:
-            return None  # the step path broadcasts or reports the shape
-        no_infinite_measurements(zs)
-        from .._compiled.particle import bootstrap_sequence
-
-        return bootstrap_sequence(self, self._specs, state, zs, keep_cov)
-
 
 SIR = BootstrapParticleFilter
 """Alias: the sampling-importance-resampling filter is the bootstrap filter."""
 
 
-def _propagate(motion: Any, X: np.ndarray, k: int, dt: float | None, rng) -> np.ndarray:
-    """Draw x_k ~ p(x_k | x_{k−1}) for every particle."""
+def propagate_particles(motion: Any, X: np.ndarray, k: int, dt: float | None, rng) -> np.ndarray:
+    """Draw x_k ~ p(x_k | x_{k−1}) for every particle ``X (*b, N, n)`` with the motion model's ``sample``.
+
+    The draw every particle filter (NumPy or compiled step) makes first, from ``rng``.
+    """
     if dt is None:
         return np.asarray(motion.sample(X, k, rng), dtype=float)
     return np.asarray(motion.sample(X, k, rng, dt=dt), dtype=float)

@@ -36,7 +36,7 @@ from typing import Callable
 import numpy as np
 
 from ..rng import RunStreams
-from ._workspace import Workspace, scratch
+from .workspace import Workspace, scratch
 
 __all__ = [
     "systematic",

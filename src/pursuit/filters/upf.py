@@ -55,8 +55,9 @@ import numpy as np
 from .._linalg import cholesky_psd, mv
 from .._validation import in_range, nonnegative, time_step
 from ..rng import RNGLike
-from .gaussian import GaussianState, UnscentedKalmanFilter, motion_jacobian
-from .particle import ParticleFilterBase, ParticleState, _prepare_measurement, _propagate, weighted_moments
+from .gaussian import GaussianState, UnscentedKalmanFilter
+from .jacobians import motion_jacobian
+from .particle import ParticleFilterBase, ParticleState, _prepare_measurement, propagate_particles, weighted_moments
 
 __all__ = ["PartialUPF", "JitteredMotion", "full_rank_motion"]
 
@@ -227,7 +228,7 @@ class PartialUPF(ParticleFilterBase):
         repaired = np.zeros(batch, dtype=bool)
 
         if n_u == 0:
-            X = _propagate(self._model, X_prev, k, dt, rng)
+            X = propagate_particles(self._model, X_prev, k, dt, rng)
             log_corr = None
             P_u = None
             log_prior = logw_prev
@@ -248,7 +249,7 @@ class PartialUPF(ParticleFilterBase):
             if Xr is None:
                 X, log_corr = x_u, log_corr_u
             else:
-                x_r = _propagate(self._model, Xr, k, dt, rng)
+                x_r = propagate_particles(self._model, Xr, k, dt, rng)
                 X = np.concatenate([x_u, x_r], axis=-2)
                 log_corr = np.concatenate([log_corr_u, np.zeros(x_r.shape[:-1])], axis=-1)
             if logw_prev is None or order is None:
