@@ -39,7 +39,7 @@ from .common import (
     wrap,
 )
 from .kernel_args import Motion, PFOutputs
-from .model_math import h_row, propagate_row, ungm_h, ungm_mean
+from .model_math import h_point, h_row, propagate_point, propagate_row, ungm_h, ungm_mean
 from .specs import M_UNGM, UNGM
 from .streams import fill_normal, fill_random, next_random
 
@@ -271,10 +271,12 @@ def _fast_run(r, X, logw, logN, noise, draws, motion, sensor, opts, out):
         zr[j] = zvec[j]
     zhat = np.zeros(m)
     mx = -np.inf
-    # pass 1
+    # pass 1 (the models' fields read once, outside the particle loop)
+    mk, F, G, par = motion.kind, motion.F, motion.G, motion.par
+    hk, A, idx, scale = sensor.kind, sensor.A, sensor.idx, sensor.scale
     for i in range(N):
-        propagate_row(motion, Xin, i, nz, Xp, i)
-        h_row(sensor, Xp, i, Zp, i)
+        propagate_point(mk, F, G, par, Xin, i, nz, Xp, i)
+        h_point(hk, A, idx, scale, Xp, i, Zp, i)
         ll = 0.0
         for j in range(m):
             d = zr[j] - Zp[i, j]
