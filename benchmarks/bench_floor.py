@@ -140,6 +140,7 @@ def kalman_split(runs: int, steps: int) -> tuple[float, float, float, float]:
 
     from pursuit._compiled import gauss_kernels as GK
     from pursuit._compiled import generated, kf_codegen
+    from pursuit._compiled.kernel_args import GaussOutputs, Prediction
     from pursuit._compiled.particle import measurement_args
     from pursuit.models import ConstantVelocity, LinearGaussian
 
@@ -160,18 +161,18 @@ def kalman_split(runs: int, steps: int) -> tuple[float, float, float, float]:
     Q = np.ascontiguousarray(ms.cov(1, None))
     zl = np.ascontiguousarray(np.moveaxis(zs, 2, 1))  # (T, m, M) lane-major
     valid = ~np.isnan(zl)
-    outs = (np.empty((n, runs)), np.empty((n, n, runs)), np.empty((n, runs)), np.empty((n, n, runs)),
+    outs = GaussOutputs(np.empty((n, runs)), np.empty((n, n, runs)), np.empty((n, runs)), np.empty((n, n, runs)),
             np.empty((n, n, runs)), np.empty((m, runs)), np.empty((m, m, runs)), np.empty(runs),
             np.empty(runs, dtype=np.int64), np.empty(runs), np.ones(runs, dtype=np.bool_))
-    margs = measurement_args(hs)
+    sensor = measurement_args(hs)
     x0 = np.zeros((n, runs))
     P0 = np.ascontiguousarray(np.broadcast_to(np.eye(n)[..., None], (n, n, runs)))
 
     def block_only():
         x, P = x0, P0
         for k in range(steps):
-            GK.ekf_step_serial(x, P, zl[k], valid[k], F, Q, 1.0, *margs, *outs)
-            x, P = outs[0].copy(), outs[1].copy()
+            GK.ekf_step_serial((x, P), (zl[k], valid[k]), Prediction(F, Q, 1.0), sensor, outs)
+            x, P = outs.x.copy(), outs.P.copy()
 
     gen = generated.linear_kf_kernels(F, Q, hs.A, hs.R)
     rows = kf_codegen.step_rows(n, m)

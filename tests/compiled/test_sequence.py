@@ -78,8 +78,9 @@ class _Flagging:
         def call(*args):
             self._calls.append(kernel)
             kernel(*args)
-            # the generated kernel takes a range of blocks after the outputs
-            means, ok = (args[-10], args[-3]) if generated_kernel else (args[-8], args[-1])
+            # the generated kernel takes a range of blocks after the outputs; the block kernel's outputs
+            # are one GaussSequenceOutputs, its last argument
+            means, ok = (args[-10], args[-3]) if generated_kernel else (args[-1].means, args[-1].ok)
             ok[self._flagged] = False
             # what the kernel left there must not survive (the generated kernel's means are flattened per step)
             means.reshape(means.shape[0], ok.shape[0], -1)[:, self._flagged] = -1.0

@@ -1,7 +1,7 @@
-"""Small compiled helpers shared by the particle and Gaussian kernels: models, resampling, linear algebra.
+"""Small compiled helpers shared by the particle and Gaussian kernels: elementary functions, resampling, linear algebra.
 
-Everything here is ``@njit(cache=True, error_model="numpy")``; the model functions evaluate the
-built-in models of :mod:`pursuit._compiled.specs` for one state vector.
+Everything here is ``@njit(cache=True, error_model="numpy")``.  The models themselves are
+evaluated in :mod:`pursuit._compiled.model_math`.
 """
 
 from __future__ import annotations
@@ -14,9 +14,6 @@ import numpy as np
 from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
-
-# model kinds are defined once, in specs.py (module constants are frozen into the compiled code)
-from .specs import LINEAR, M_LINEAR, M_RANGE, M_RANGE_BEARING, M_UNGM, UNGM  # noqa: F401 (re-exported to the kernels)
 
 R_SYSTEMATIC = 0
 R_STRATIFIED = 1
@@ -180,70 +177,6 @@ def log_positive(x):
 def wrap(a):
     """Angle wrapped to [-π, π), as :func:`pursuit.models.measurement.wrap_angle`."""
     return (a + math.pi) % TWO_PI - math.pi
-
-
-@njit(cache=True, error_model="numpy")
-def h_one(hk, A, idx, scale, x, out):
-    """Noise-free measurement of one state ``x`` (n,) into ``out`` (m,)."""
-    if hk == M_UNGM:
-        out[0] = x[0] * x[0] * (1.0 / scale)
-    elif hk == M_LINEAR:
-        m, n = A.shape
-        for a in range(m):
-            acc = 0.0
-            for j in range(n):
-                acc += A[a, j] * x[j]
-            out[a] = acc
-    elif hk == M_RANGE:
-        s, d = A.shape
-        for a in range(s):
-            acc = 0.0
-            for j in range(d):
-                t = x[idx[j]] - A[a, j]
-                acc += t * t
-            out[a] = math.sqrt(acc) / scale
-    else:
-        dx = x[idx[0]] - A[0, 0]
-        dy = x[idx[1]] - A[0, 1]
-        out[0] = math.hypot(dx, dy)
-        out[1] = math.atan2(dy, dx)
-
-
-@njit(cache=True, error_model="numpy")
-def jac_one(hk, A, idx, scale, x, out):
-    """Measurement Jacobian at one state ``x`` into ``out`` (m, n) (zeros where a model has them)."""
-    m, n = out.shape
-    for a in range(m):
-        for j in range(n):
-            out[a, j] = 0.0
-    if hk == M_UNGM:
-        out[0, 0] = (2.0 / scale) * x[0]
-    elif hk == M_LINEAR:
-        for a in range(m):
-            for j in range(n):
-                out[a, j] = A[a, j]
-    elif hk == M_RANGE:
-        s, d = A.shape
-        for a in range(s):
-            acc = 0.0
-            for j in range(d):
-                t = x[idx[j]] - A[a, j]
-                acc += t * t
-            r = math.sqrt(acc)
-            if r > 0:
-                for j in range(d):
-                    out[a, idx[j]] = (x[idx[j]] - A[a, j]) / r / scale
-    else:
-        dx = x[idx[0]] - A[0, 0]
-        dy = x[idx[1]] - A[0, 1]
-        r2 = dx * dx + dy * dy
-        r = math.sqrt(r2)
-        if r > 0:
-            out[0, idx[0]] = dx / r
-            out[0, idx[1]] = dy / r
-        if r2 > 0:
-            out[1, idx[0]] = -dy / r2
-            out[1, idx[1]] = dx / r2
 
 
 @njit(cache=True, error_model="numpy")

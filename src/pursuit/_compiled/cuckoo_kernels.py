@@ -24,7 +24,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .common import LOG_2PI, copy_by_counts, h_one, n_uniforms, resample_counts, serial_and_parallel, wrap
+from .common import LOG_2PI, copy_by_counts, n_uniforms, resample_counts, serial_and_parallel, wrap
+from .model_math import h_row
 from .pf_kernels import exp_shifted_run, measure_run, moments_run, predictive_run
 from .streams import fill_normal, fill_random
 
@@ -40,21 +41,23 @@ TREND_LINEAR = 2
 
 
 @njit(cache=True, error_model="numpy")
-def _fitness(hk, A, idx, scale, R, angle, x, z, valid, measured, full, hbuf):
-    """Fitness of one particle, with the NumPy filter's arithmetic (0 where nothing is measured).
+def _fitness(sensor, X, i, z, valid, measured, full, hbuf):
+    """Fitness of particle ``X[i]``, with the NumPy filter's arithmetic (0 where nothing is measured).
 
     ``full=False``: −½ νᵀR⁻¹ν as Σ ν_j² (−½/R_jj) (the stock fast path);
     ``full=True``: the whole log-density −½ Σ (ν_j²/R_jj + log R_jj + log 2π)
     (missing components, angle models), as ``gaussian_loglik``.  The search
     amplifies rounding differences, so the two forms are kept apart.
+    ``hbuf`` (1, m) is scratch.
     """
     if not measured:
         return 0.0
-    h_one(hk, A, idx, scale, x, hbuf)
+    R, angle = sensor.R, sensor.angle
+    h_row(sensor, X, i, hbuf, 0)
     acc = 0.0
     for j in range(z.shape[0]):
         if valid[j]:
-            r = z[j] - hbuf[j]
+            r = z[j] - hbuf[0, j]
             if angle and j == 1:
                 r = wrap(r)
             if full:
@@ -65,7 +68,7 @@ def _fitness(hk, A, idx, scale, R, angle, x, z, valid, measured, full, hbuf):
 
 
 @njit(cache=True, error_model="numpy")
-def _greedy(X, F, C, hk, A, idx, scale, R, angle, z, valid, measured, add, lower, upper, hbuf):
+def _greedy(X, F, C, sensor, z, valid, measured, add, lower, upper, hbuf):
     """Keep each candidate row of C whose fitness is strictly higher; returns the number accepted."""
     N, n = X.shape
     acc = 0
@@ -77,7 +80,7 @@ def _greedy(X, F, C, hk, A, idx, scale, R, angle, z, valid, measured, add, lower
             if c > upper[j]:
                 c = upper[j]
             C[i, j] = c
-        fc = _fitness(hk, A, idx, scale, R, angle, C[i], z, valid, measured, add, hbuf)
+        fc = _fitness(sensor, C, i, z, valid, measured, add, hbuf)
         if fc > F[i]:
             F[i] = fc
             for j in range(n):
@@ -108,13 +111,20 @@ def _mantegna(u, v, beta, sigma_u):
 
 
 @njit(cache=True, error_model="numpy")
-def search_run(X, F, normals, uniforms, n_iter, alphas, pas, amin, amax, trend, kappa, beta, sigma_u, scaling,
-               yang, log_stop, use_stop, lower, upper, hk, A, idx, scale, R, angle, z, valid, measured, add):
-    """The cuckoo search of one run, in place on X (N, n) and F (N,); returns (iterations, accepted)."""
+def search_run(X, F, normals, uniforms, search, sensor, z, valid, measured, add):
+    """The cuckoo search of one run, in place on X (N, n) and F (N,); returns (iterations, accepted).
+
+    ``search`` is a :class:`~.kernel_args.SearchArgs`, ``normals`` and
+    ``uniforms`` the run's draws for all iterations, ``add`` whether the
+    fitness carries the normalising constant (:func:`_fitness`).
+    """
+    n_iter, alphas, pas, amin, amax = search.n_iter, search.alphas, search.pas, search.alpha_min, search.alpha_max
+    trend, kappa, beta, sigma_u, scaling = search.trend, search.kappa, search.beta, search.sigma_u, search.scaling
+    yang, log_stop, use_stop, lower, upper = search.yang, search.log_stop, search.use_stop, search.lower, search.upper
     N, n = X.shape
     kk = 3 if scaling == SCALE_RELATIVE else 2
     C = np.empty((N, n))
-    hbuf = np.empty(z.shape[0])
+    hbuf = np.empty((1, z.shape[0]))
     f_prev = np.empty(N)
     f_start = np.empty(N)
     alpha = np.empty(N)
@@ -172,7 +182,7 @@ def search_run(X, F, normals, uniforms, n_iter, alphas, pas, amin, amax, trend, 
                     if scaling == SCALE_STD:
                         st *= sd[j]
                     C[i, j] = X[i, j] + st * alpha[i]
-        accepted += _greedy(X, F, C, hk, A, idx, scale, R, angle, z, valid, measured, add, lower, upper, hbuf)
+        accepted += _greedy(X, F, C, sensor, z, valid, measured, add, lower, upper, hbuf)
         # 2. discovery
         ub = t * (N * n + 1 + 2 * N)
         pa = pas[t]
@@ -186,15 +196,30 @@ def search_run(X, F, normals, uniforms, n_iter, alphas, pas, amin, amax, trend, 
                 d = (X[p1[i], j] - X[p2[i], j]) * (1.0 if K else 0.0)
                 C[i, j] = X[i, j] + d * r
         # candidates read X before any greedy replacement (as the NumPy step): C is complete here
-        accepted += _greedy(X, F, C, hk, A, idx, scale, R, angle, z, valid, measured, add, lower, upper, hbuf)
+        accepted += _greedy(X, F, C, sensor, z, valid, measured, add, lower, upper, hbuf)
     return iterations, accepted
 
 
-def _cuckoo_step(Xprop, logw, state_uniform, sequential, normals, uniforms, z, valid, addrs, per_run,
-                 hk, A, idx, scale, R, angle, include_const, n_iter, alphas, pas, amin, amax, trend, kappa, beta, sigma_u,
-                 scaling, yang, log_stop, use_stop, lower, upper, best_estimate, rkind, thr,
-                 Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, fbest, iters, acc):
-    """One CS-PF / ICS-PF step for every run; outputs in place (module docstring)."""
+def _cuckoo_step(particles, draws, obs, sensor, search, opts, out):
+    """One CS-PF / ICS-PF step for every run; outputs in place (module docstring).
+
+    ``particles`` is ``(Xprop (B, N, n) propagated, logw (B, N))``, ``draws``
+    ``(normals (B, ·), uniforms (B, ·), Draws)``, ``obs`` ``(z, valid)``,
+    ``sensor`` the packed measurement model, ``search`` a
+    :class:`~.kernel_args.SearchArgs`, ``opts`` a
+    :class:`~.kernel_args.CuckooOptions` and ``out`` a
+    :class:`~.kernel_args.CuckooOutputs`.
+    """
+    Xprop, logw = particles
+    normals, uniforms, streams = draws
+    addrs, per_run = streams
+    z, valid = obs
+    state_uniform, sequential, include_const, best_estimate, rkind, thr = opts
+    n_iter = search.n_iter
+    pf = out.pf
+    Xout, logw_out, mean, cov, innov, S = pf.particles, pf.logw, pf.mean, pf.cov, pf.innov, pf.S
+    nis, dof, loglik, reset, ess, need = pf.nis, pf.dof, pf.loglik, pf.reset, pf.ess, pf.need
+    fbest, iters, acc = out.fitness_best, out.iterations, out.accepted
     M, N, n = Xprop.shape
     for rr in prange(M):
         r = np.int64(rr)
@@ -203,7 +228,7 @@ def _cuckoo_step(Xprop, logw, state_uniform, sequential, normals, uniforms, z, v
         m = z.shape[1]
         Zp = np.empty((N, m))
         ll = np.empty(N)
-        const, measured = measure_run(hk, A, idx, scale, R, angle, Xp, z[r], valid[r], Zp, ll)
+        const, measured = measure_run(sensor, Xp, z[r], valid[r], Zp, ll)
         with_prior = sequential and not state_uniform
         offset = np.zeros(N)
         uniform = True
@@ -214,7 +239,7 @@ def _cuckoo_step(Xprop, logw, state_uniform, sequential, normals, uniforms, z, v
                     uniform = False
         L = np.empty((m, m))
         tmp = np.empty(m)
-        nis[r], dof[r] = predictive_run(Zp, offset, uniform, z[r], valid[r], R, angle, innov[r], S[r], L, tmp)
+        nis[r], dof[r] = predictive_run(sensor, Zp, offset, uniform, z[r], valid[r], innov[r], S[r], L, tmp)
         a = np.empty(N)
         for i in range(N):
             a[i] = ll[i] + offset[i]
@@ -226,18 +251,16 @@ def _cuckoo_step(Xprop, logw, state_uniform, sequential, normals, uniforms, z, v
         add = include_const
         F = np.empty(N)
         if include_const:
-            hb = np.empty(m)
+            hb = np.empty((1, m))
             for i in range(N):
-                F[i] = _fitness(hk, A, idx, scale, R, angle, Xp[i], z[r], valid[r], measured, True, hb)
+                F[i] = _fitness(sensor, Xp, i, z[r], valid[r], measured, True, hb)
         else:
             for i in range(N):
                 F[i] = ll[i] if measured else 0.0
         if per_run and n_iter > 0:
             fill_normal(addrs[r], normals[r])
             fill_random(addrs[r], uniforms[r])
-        it, ac = search_run(Xp, F, normals[r], uniforms[r], n_iter, alphas, pas, amin, amax, trend, kappa, beta, sigma_u,
-                            scaling, yang, log_stop, use_stop, lower, upper, hk, A, idx, scale, R, angle, z[r], valid[r],
-                            measured, add)
+        it, ac = search_run(Xp, F, normals[r], uniforms[r], search, sensor, z[r], valid[r], measured, add)
         iters[r] = it
         acc[r] = ac
         # weights of the moved particles

@@ -25,7 +25,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .common import LOG_2PI, M_LINEAR, M_RANGE, M_UNGM, serial_and_parallel, wrap
+from .common import LOG_2PI, serial_and_parallel, wrap
+from .model_math import h_row, jac_row
 
 BLOCK = 512
 _NJ = dict(cache=True, error_model="numpy")
@@ -208,73 +209,19 @@ def _spd_inv(S, Si, ok, logdet):
 
 
 @njit(**_NJ)
-def _h_block(hk, A, idx, scale, X, out):
-    """out (m, B) = h of the states X (n, B)."""
-    B = X.shape[1]
-    if hk == M_UNGM:
-        for c in range(B):
-            out[0, c] = X[0, c] * X[0, c] * (1.0 / scale)
-    elif hk == M_LINEAR:
-        _cmv(A, X, out)
-    elif hk == M_RANGE:
-        s, d = A.shape
-        for a in range(s):
-            o = out[a]
-            o[:] = 0.0
-            for j in range(d):
-                xj = X[idx[j]]
-                aj = A[a, j]
-                for c in range(B):
-                    t = xj[c] - aj
-                    o[c] += t * t
-            for c in range(B):
-                o[c] = math.sqrt(o[c]) / scale
-    else:
-        for c in range(B):
-            dx = X[idx[0], c] - A[0, 0]
-            dy = X[idx[1], c] - A[0, 1]
-            out[0, c] = math.hypot(dx, dy)
-            out[1, c] = math.atan2(dy, dx)
+def _h_block(sensor, X, out):
+    """out (m, B) = h of the states X (n, B), run by run (:func:`.model_math.h_row` on the transposes)."""
+    XT, oT = X.T, out.T
+    for c in range(X.shape[1]):
+        h_row(sensor, XT, c, oT, c)
 
 
 @njit(**_NJ)
-def _jac_block(hk, A, idx, scale, X, H):
-    """H (m, n, B) = ∂h/∂x at the states X (n, B)."""
-    B = X.shape[1]
-    m, n = H.shape[0], H.shape[1]
-    H[:] = 0.0
-    if hk == M_UNGM:
-        for c in range(B):
-            H[0, 0, c] = (2.0 / scale) * X[0, c]
-    elif hk == M_LINEAR:
-        for a in range(m):
-            for j in range(n):
-                H[a, j, :] = A[a, j]
-    elif hk == M_RANGE:
-        s, d = A.shape
-        r = np.empty(B)
-        for a in range(s):
-            r[:] = 0.0
-            for j in range(d):
-                for c in range(B):
-                    t = X[idx[j], c] - A[a, j]
-                    r[c] += t * t
-            for j in range(d):
-                for c in range(B):
-                    rr = math.sqrt(r[c])
-                    H[a, idx[j], c] = (X[idx[j], c] - A[a, j]) / rr / scale if rr > 0 else 0.0
-    else:
-        for c in range(B):
-            dx = X[idx[0], c] - A[0, 0]
-            dy = X[idx[1], c] - A[0, 1]
-            r2 = dx * dx + dy * dy
-            rr = math.sqrt(r2)
-            if rr > 0:
-                H[0, idx[0], c] = dx / rr
-                H[0, idx[1], c] = dy / rr
-            if r2 > 0:
-                H[1, idx[0], c] = -dy / r2
-                H[1, idx[1], c] = dx / r2
+def _jac_block(sensor, X, H):
+    """H (m, n, B) = ∂h/∂x at the states X (n, B), run by run (:func:`.model_math.jac_row`)."""
+    XT, HT = X.T, H.transpose((2, 0, 1))
+    for c in range(X.shape[1]):
+        jac_row(sensor, XT, c, HT, c)
 
 
 # --------------------------------------------------------------------------
@@ -289,20 +236,27 @@ def _update_workspace(n, m, B):
 
 
 @njit(**_NJ)
-def _update(xp, Pp, zp, Pzz, Pxz, L, HL, D, z, v, R, angle, x_o, P_o, innov, S_o, nis, dof, loglik, ok):
-    """Kalman update of one block; v (m, B) is 1.0 where measured, 0.0 where missing.
+def _update(pred, obs, sensor, blk):
+    """Kalman update of one block.
 
-    ``L (n, n, B)`` is the Cholesky factor of ``Pp``, ``HL (m, n, B)`` the
-    linearisation times L and ``D (m, m, B)`` the linearisation-error
-    covariance added to R (zeros for the KF/EKF).
+    ``pred = (xp, Pp, zp, Pzz, Pxz, L, HL, D)``: the predicted state and
+    measurement moments, ``L (n, n, B)`` the Cholesky factor of ``Pp``,
+    ``HL (m, n, B)`` the linearisation times L and ``D (m, m, B)`` the
+    linearisation-error covariance added to R (zeros for the KF/EKF).
+    ``obs = (z, v)`` with v (m, B) 1.0 where measured, 0.0 where missing.
+    ``blk = (x, P, innov, S, nis, dof, loglik, ok)``: the block's outputs.
     """
-    _update_ws(xp, Pp, zp, Pzz, Pxz, L, HL, D, z, v, R, angle, x_o, P_o, innov, S_o, nis, dof, loglik, ok,
-               _update_workspace(xp.shape[0], zp.shape[0], xp.shape[1]))
+    xp, zp = pred[0], pred[2]
+    _update_ws(pred, obs, sensor, blk, _update_workspace(xp.shape[0], zp.shape[0], xp.shape[1]))
 
 
 @njit(**_NJ)
-def _update_ws(xp, Pp, zp, Pzz, Pxz, L, HL, D, z, v, R, angle, x_o, P_o, innov, S_o, nis, dof, loglik, ok, ws):
+def _update_ws(pred, obs, sensor, blk, ws):
     """:func:`_update` with its scratch arrays ``ws`` from :func:`_update_workspace`."""
+    xp, Pp, zp, Pzz, Pxz, L, HL, D = pred
+    z, v = obs
+    R, angle = sensor.R, sensor.angle
+    x_o, P_o, innov, S_o, nis, dof, loglik, ok = blk
     nu, S, Reff, Si, ld, Pxm, K, AL, KN, T2, q, dd = ws
     n = xp.shape[0]
     m = zp.shape[0]
@@ -411,9 +365,18 @@ def _store(blk, full, r0):
             f2[i, r0 + c] = b2[i, c]
 
 
-def _ekf_step(x, P, z, valid, F, Q, lam, hk, A, idx, scale, R, angle,
-              x_out, P_out, xp_out, Pp_out, cross_out, innov, S_out, nis, dof, loglik, ok):
-    """KF / EKF step (Joseph form) on lane-major arrays; linear motion F, Q."""
+def _ekf_step(state, obs, prediction, sensor, out):
+    """KF / EKF step (Joseph form) on lane-major arrays; linear motion F, Q.
+
+    ``state = (x (n, M), P (n, n, M))``, ``obs = (z (m, M), valid)``,
+    ``prediction`` a :class:`~.kernel_args.Prediction`, ``sensor`` the
+    packed measurement model, ``out`` a :class:`~.kernel_args.GaussOutputs`.
+    """
+    x, P = state
+    z, valid = obs
+    F, Q, lam = prediction
+    R = sensor.R
+    x_out, P_out, xp_out, Pp_out, cross_out, innov, S_out, nis, dof, loglik, ok = out
     n, M = x.shape
     m = R.shape[0]
     nblocks = (M + BLOCK - 1) // BLOCK
@@ -433,9 +396,9 @@ def _ekf_step(x, P, z, valid, F, Q, lam, hk, A, idx, scale, R, angle,
                 for c in range(B):
                     Pp[i, j, c] = (Pp[i, j, c] if lam == 1.0 else lam * Pp[i, j, c]) + q
         zp = np.empty((m, B))
-        _h_block(hk, A, idx, scale, xp, zp)
+        _h_block(sensor, xp, zp)
         H = np.empty((m, n, B))
-        _jac_block(hk, A, idx, scale, xp, H)
+        _jac_block(sensor, xp, H)
         PHt = np.empty((n, m, B))
         _bmmT(Pp, H, PHt)
         Pzz = np.empty((m, m, B))
@@ -449,7 +412,7 @@ def _ekf_step(x, P, z, valid, F, Q, lam, hk, A, idx, scale, R, angle,
         _chol(Pp, L, okb)
         HL = np.empty((m, n, B))
         _bmm(H, L, HL)
-        _update(xp, Pp, zp, Pzz, PHt, L, HL, np.zeros((m, m, B)), zb, vb, R, angle, xo, Po, inb, Sb, nb, db, lb, okb)
+        _update((xp, Pp, zp, Pzz, PHt, L, HL, np.zeros((m, m, B))), (zb, vb), sensor, (xo, Po, inb, Sb, nb, db, lb, okb))
         _store(xo, x_out, r0)
         _store(Po, P_out, r0)
         _store(xp, xp_out, r0)
@@ -464,19 +427,24 @@ def _ekf_step(x, P, z, valid, F, Q, lam, hk, A, idx, scale, R, angle,
             ok[r0 + c] = okb[c]
 
 
-def _ekf_sequence(x0, P0, zs, valid, F, Q, lam, hk, A, idx, scale, R, angle, keep_cov,
-                  means, covs, innov, S_out, nis, dof, loglik, ok):
+def _ekf_sequence(prior, obs, prediction, sensor, keep_cov, out):
     """All K steps of the KF / EKF for every run, without returning to Python between steps.
 
     The same block arithmetic as :func:`_ekf_step`, step after step, with
     each block's state kept in block arrays.  Inputs are lane-major
-    (``x0 (n, M)``, ``P0 (n, n, M)``, ``zs`` and ``valid`` ``(K, m, M)``);
-    outputs are in the track's layout (``means (K, M, n)``, ``covs
-    (K, M, n, n)`` when ``keep_cov``, ``innov (K, M, m)``, ``S_out
-    (K, M, m, m)``, ``nis``, ``dof``, ``loglik`` ``(K, M)``).  ``ok[r]`` ends
-    False when run r's covariance or innovation covariance failed to factor
-    at any step; the caller recomputes such runs step by step.
+    (``prior = (x0 (n, M), P0 (n, n, M))``, ``obs = (zs, valid)``, each
+    ``(K, m, M)``); ``out`` (a :class:`~.kernel_args.GaussSequenceOutputs`)
+    is in the track's layout (``means (K, M, n)``, ``covs (K, M, n, n)``
+    when ``keep_cov``, ``innov (K, M, m)``, ``S (K, M, m, m)``, ``nis``,
+    ``dof``, ``loglik`` ``(K, M)``).  ``out.ok[r]`` ends False when run r's
+    covariance or innovation covariance failed to factor at any step; the
+    caller recomputes such runs step by step.
     """
+    x0, P0 = prior
+    zs, valid = obs
+    F, Q, lam = prediction
+    R = sensor.R
+    means, covs, innov, S_out, nis, dof, loglik, ok = out
     n, M = x0.shape
     m = R.shape[0]
     K = zs.shape[0]
@@ -514,13 +482,13 @@ def _ekf_sequence(x0, P0, zs, valid, F, Q, lam, hk, A, idx, scale, R, angle, kee
                     q = Q[i, j]
                     for c in range(B):
                         Pp[i, j, c] = (Pp[i, j, c] if lam == 1.0 else lam * Pp[i, j, c]) + q
-            _h_block(hk, A, idx, scale, xp, zp)
-            _jac_block(hk, A, idx, scale, xp, H)
+            _h_block(sensor, xp, zp)
+            _jac_block(sensor, xp, H)
             _bmmT(Pp, H, PHt)
             _bmm(H, PHt, Pzz)
             _chol(Pp, L, okb)
             _bmm(H, L, HL)
-            _update_ws(xp, Pp, zp, Pzz, PHt, L, HL, D0, zb, vb, R, angle, xo, Po, inb, Sb, nb, db, lb, okb, ws)
+            _update_ws((xp, Pp, zp, Pzz, PHt, L, HL, D0), (zb, vb), sensor, (xo, Po, inb, Sb, nb, db, lb, okb), ws)
             for c in range(B):
                 r = r0 + c
                 for i in range(n):
@@ -558,9 +526,17 @@ def _points(x, L, cscale, centre, chi):
                 chi[off + n + j, i, c] = x[i, c] - col
 
 
-def _sigma_step(x, P, z, valid, F, Q, lam, hk, A, idx, scale, R, angle, cscale, wm, wc, centre,
-                x_out, P_out, xp_out, Pp_out, cross_out, innov, S_out, nis, dof, loglik, ok):
-    """UKF / CKF step on lane-major arrays (points x ± cscale · columns of chol P, centre first if ``centre``)."""
+def _sigma_step(state, obs, prediction, sensor, sigma, out):
+    """UKF / CKF step on lane-major arrays (points x ± cscale · columns of chol P, centre first if ``centre``).
+
+    Arguments as :func:`_ekf_step`'s, with ``sigma`` a :class:`~.kernel_args.SigmaPoints`.
+    """
+    x, P = state
+    z, valid = obs
+    F, Q, lam = prediction
+    R, angle = sensor.R, sensor.angle
+    cscale, wm, wc, centre = sigma
+    x_out, P_out, xp_out, Pp_out, cross_out, innov, S_out, nis, dof, loglik, ok = out
     n, M = x.shape
     m = R.shape[0]
     npts = wm.shape[0]
@@ -610,7 +586,7 @@ def _sigma_step(x, P, z, valid, F, Q, lam, hk, A, idx, scale, R, angle, cscale, 
         _points(xp, L, cscale, centre, chi)
         Z = np.empty((npts, m, B))
         for s in range(npts):
-            _h_block(hk, A, idx, scale, chi[s], Z[s])
+            _h_block(sensor, chi[s], Z[s])
         zp = np.zeros((m, B))
         for s in range(npts):
             w = wm[s]
@@ -672,7 +648,7 @@ def _sigma_step(x, P, z, valid, F, Q, lam, hk, A, idx, scale, R, angle, cscale, 
         inb, Sb = np.empty((m, B)), np.empty((m, m, B))
         nb, lb = np.empty(B), np.empty(B)
         db = np.empty(B, dtype=np.int64)
-        _update(xp, Pp, zp, Pzz, Pxz, L, GT, D, zb, vb, R, angle, xo, Po, inb, Sb, nb, db, lb, okb)
+        _update((xp, Pp, zp, Pzz, Pxz, L, GT, D), (zb, vb), sensor, (xo, Po, inb, Sb, nb, db, lb, okb))
         _store(xo, x_out, r0)
         _store(Po, P_out, r0)
         _store(xp, xp_out, r0)

@@ -30,6 +30,7 @@ from ..filters.gaussian import GaussianState
 from ..gaussian import Gaussian
 from . import gauss_kernels as GK
 from . import generated, kf_codegen
+from .kernel_args import GaussOutputs, GaussSequenceOutputs, Prediction, SigmaPoints
 from .particle import measurement_args, use_parallel
 from .specs import M_LINEAR
 
@@ -88,16 +89,15 @@ def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, 
         nis, loglik = np.empty(M), np.empty(M)
         dof = np.empty(M, dtype=np.int64)
         ok = np.ones(M, dtype=np.bool_)
-        margs = measurement_args(hs)
-        outs = (x_out, P_out, xp, Pp, cross, innov, S, nis, dof, loglik, ok)
+        args = ((x, P), (zl, valid), Prediction(F, Q, lam), measurement_args(hs))
+        outs = GaussOutputs(x_out, P_out, xp, Pp, cross, innov, S, nis, dof, loglik, ok)
         if kind == "ekf":
-            (GK.ekf_step_parallel if par else GK.ekf_step_serial)(x, P, zl, valid, F, Q, lam, *margs, *outs)
+            (GK.ekf_step_parallel if par else GK.ekf_step_serial)(*args, outs)
         else:
             cscale, wm, wc = filt.sigma_weights(n)
             centre = wm.shape[0] % 2 == 1
-            (GK.sigma_step_parallel if par else GK.sigma_step_serial)(
-                x, P, zl, valid, F, Q, lam, *margs, float(cscale), np.ascontiguousarray(wm), np.ascontiguousarray(wc), centre, *outs
-            )
+            sigma = SigmaPoints(float(cscale), np.ascontiguousarray(wm), np.ascontiguousarray(wc), centre)
+            (GK.sigma_step_parallel if par else GK.sigma_step_serial)(*args, sigma, outs)
     info = {
         "innovation": innov.T,
         "S": S.transpose(2, 0, 1),
@@ -174,7 +174,8 @@ def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_co
         zl = np.ascontiguousarray(np.moveaxis(zs, 2, 1))  # (K, m, M)
         valid = ~np.isnan(zl)
         kernel = GK.ekf_sequence_parallel if use_parallel(M) else GK.ekf_sequence_serial
-        kernel(x, P, zl, valid, F, Q, lam, *measurement_args(hs), keep_cov, means, covs, innov, S, nis, dof, loglik, ok)
+        kernel((x, P), (zl, valid), Prediction(F, Q, lam), measurement_args(hs), keep_cov,
+               GaussSequenceOutputs(means, covs, innov, S, nis, dof, loglik, ok))
     info = {
         "innovation": innov,
         "S": S,

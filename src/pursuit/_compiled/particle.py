@@ -27,6 +27,7 @@ from ..filters.workspace import memo, recycled, scratch
 from ..rng import RunStreams
 from . import pf_kernels as K
 from .common import R_MULTINOMIAL, R_RESIDUAL, R_STRATIFIED, R_SYSTEMATIC
+from .kernel_args import CuckooOptions, CuckooOutputs, Draws, Motion, PFOptions, PFOutputs, SearchArgs, Sensor
 from .specs import MeasurementSpec, MotionSpec
 from .streams import stream_addresses
 
@@ -72,9 +73,9 @@ def run_stream_addresses(rng: Any, work) -> tuple[np.ndarray, bool]:
     return (_NO_STREAMS, False) if addrs is None else (addrs, True)
 
 
-def measurement_args(hs: MeasurementSpec) -> tuple:
-    """The measurement model's arguments for the kernels."""
-    return hs.kind, hs.A, hs.idx, hs.scale, hs.R, hs.angle
+def measurement_args(hs: MeasurementSpec) -> Sensor:
+    """The measurement model packed for the kernels."""
+    return hs.kernel_args()
 
 
 def flat_batch(state_particles: np.ndarray) -> tuple[tuple[int, ...], int]:
@@ -138,8 +139,8 @@ def bootstrap_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Parti
     reset, need = np.empty(B, dtype=np.bool_), np.empty(B, dtype=np.bool_)
     kernel = K.pf_step_parallel if use_parallel(B) else K.pf_step_serial
     kernel(
-        X, logw, noise, zf, valid, addrs, per_run, ms.kind, F, G, par, *measurement_args(hs), rkind, thr,
-        Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need,
+        (X, logw), noise, (zf, valid), Draws(addrs, per_run), Motion(ms.kind, F, G, par), measurement_args(hs), PFOptions(rkind, thr),
+        PFOutputs(Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need),
     )
     if not per_run:
         _resample_with_numpy_draws(rng, need, rkind, N, logw_out, Xout)
@@ -180,12 +181,10 @@ def bootstrap_sequence(filt, specs: tuple[MotionSpec, MeasurementSpec], state: P
     logw0 = np.ascontiguousarray(state.logw, dtype=float).reshape(B, N)
     zf = np.ascontiguousarray(zs, dtype=float).reshape(T, B, m)
     valid = ~np.isnan(zf)
-    steps = [ms.arrays(k, None) for k in range(1, T + 1)]
-    Fs, Gs, pars = (np.ascontiguousarray(np.stack(part)) for part in zip(*steps))
-    q = Gs.shape[2] if ms.kind == 0 else 1
+    motion = ms.sequence_args(T)
+    q = motion.G.shape[2] if ms.kind == 0 else 1
     noise = np.empty((B, N * q))
-    Xa, Xb = np.empty((B, N, n)), np.empty((B, N, n))
-    la, lb = np.empty((B, N)), np.empty((B, N))
+    buffers = (np.empty((2, B, N, n)), np.empty((2, B, N)))  # step k reads one, writes the other
     means = np.empty((T, B, n))
     covs = np.empty((T if keep_cov else 1, B, n, n))
     innov, S = np.empty((T, B, m)), np.empty((T, B, m, m))
@@ -193,10 +192,10 @@ def bootstrap_sequence(filt, specs: tuple[MotionSpec, MeasurementSpec], state: P
     dof = np.empty((T, B), dtype=np.int64)
     reset, need = np.empty((T, B), dtype=np.bool_), np.empty((T, B), dtype=np.bool_)
     kernel = K.pf_sequence_parallel if use_parallel(B) else K.pf_sequence_serial
+    opts = PFOptions(RESAMPLER_CODES[filt.resampler], -1.0 if filt.ess_threshold is None else float(filt.ess_threshold))
     kernel(
-        X0, logw0, noise, zf, valid, addrs, ms.kind, Fs, Gs, pars, *measurement_args(hs), RESAMPLER_CODES[filt.resampler],
-        -1.0 if filt.ess_threshold is None else float(filt.ess_threshold),
-        Xa, Xb, la, lb, means, covs, keep_cov, innov, S, nis, dof, loglik, reset, ess, need,
+        (X0, logw0), noise, (zf, valid), Draws(addrs, True), motion, measurement_args(hs), opts, buffers,
+        PFOutputs(buffers[0], buffers[1], means, covs, innov, S, nis, dof, loglik, reset, ess, need), keep_cov,
     )
     info = _step_info((T, *batch), m, innov, S, nis, dof, loglik, reset, ess, need)
     return means.reshape(T, *batch, n), covs.reshape(T, *batch, n, n) if keep_cov else None, info
@@ -251,14 +250,13 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
     iters, acc = np.empty(B, dtype=np.int64), np.empty(B, dtype=np.int64)
     reset, need = np.empty(B, dtype=np.bool_), np.empty(B, dtype=np.bool_)
     kernel = CK.cuckoo_step_parallel if use_parallel(B) else CK.cuckoo_step_serial
-    kernel(
-        Xp, logw, bool(state.uniform), sequential, normals, uniforms, zf, valid, addrs, per_run,
-        *measurement_args(hs), include_const,
+    search_args = SearchArgs(
         search.n_iter, alphas, pas, float(search.alpha_min), float(search.alpha_max), trend, float(search.kappa),
-        float(search.beta), mantegna_sigma(search.beta), scaling, search.discovery == "yang", log_stop, use_stop,
-        lower, upper, filt.estimate == "best", rkind, thr,
-        Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, fbest, iters, acc,
+        float(search.beta), mantegna_sigma(search.beta), scaling, search.discovery == "yang", log_stop, use_stop, lower, upper,
     )
+    opts = CuckooOptions(bool(state.uniform), sequential, include_const, filt.estimate == "best", rkind, thr)
+    out = CuckooOutputs(PFOutputs(Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need), fbest, iters, acc)
+    kernel((Xp, logw), (normals, uniforms, Draws(addrs, per_run)), (zf, valid), measurement_args(hs), search_args, opts, out)
     if not per_run:
         _resample_with_numpy_draws(rng, need, rkind, N, logw_out, Xout)
     info = {

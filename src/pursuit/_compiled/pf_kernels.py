@@ -28,48 +28,33 @@ from numba import njit, prange
 from .common import (
     EXP_FLOOR,
     LOG_2PI,
-    M_LINEAR,
-    M_UNGM,
     R_SYSTEMATIC,
-    UNGM,
     chol_quad,
     cholesky_inplace,
     copy_by_counts,
     exp_weight,
-    h_one,
     n_uniforms,
     resample_counts,
     serial_and_parallel,
     wrap,
 )
+from .kernel_args import Motion, PFOutputs
+from .model_math import h_point, h_row, propagate_point, propagate_row, ungm_h, ungm_mean
+from .specs import M_UNGM, UNGM
 from .streams import fill_normal, fill_random, next_random
 
 
 @njit(cache=True, error_model="numpy")
-def propagate_run(mk, F, G, par, Xin, noise, Xout):
+def propagate_run(motion, Xin, noise, Xout):
     """x_k = f(x_{k−1}) + noise for the N particles of one run (noise: N·q standard normals)."""
-    N, n = Xin.shape
-    if mk == UNGM:
-        a, b, forcing, sq = par[0], par[1], par[2], par[3]
-        for i in range(N):
-            x = Xin[i, 0]
-            Xout[i, 0] = noise[i] * sq + (x * (a + b / (x * x + 1.0)) + forcing)
-    else:
-        q = G.shape[1]
-        for i in range(N):
-            for a_ in range(n):
-                acc = 0.0
-                for j in range(n):
-                    acc += F[a_, j] * Xin[i, j]
-                acc2 = 0.0
-                for j in range(q):
-                    acc2 += G[a_, j] * noise[i * q + j]
-                Xout[i, a_] = acc + acc2
+    for i in range(Xin.shape[0]):
+        propagate_row(motion, Xin, i, noise, Xout, i)
 
 
 @njit(cache=True, error_model="numpy")
-def measure_run(hk, A, idx, scale, R, angle, X, z, valid, Zp, ll):
+def measure_run(sensor, X, z, valid, Zp, ll):
     """Predicted measurements Zp (N, m) and ll (N,) = −½ Σ_valid ν²/R_jj; returns the constant and measured flag."""
+    R, angle = sensor.R, sensor.angle
     N = X.shape[0]
     m = z.shape[0]
     const = 0.0
@@ -79,7 +64,7 @@ def measure_run(hk, A, idx, scale, R, angle, X, z, valid, Zp, ll):
             measured = True
             const += -0.5 * (math.log(R[j, j]) + LOG_2PI)
     for i in range(N):
-        h_one(hk, A, idx, scale, X[i], Zp[i])
+        h_row(sensor, X, i, Zp, i)
         acc = 0.0
         for j in range(m):
             if valid[j]:
@@ -95,8 +80,9 @@ def measure_run(hk, A, idx, scale, R, angle, X, z, valid, Zp, ll):
 
 
 @njit(cache=True, error_model="numpy")
-def predictive_run(Zp, offset, uniform, z, valid, R, angle, innov, S, L, tmp):
+def predictive_run(sensor, Zp, offset, uniform, z, valid, innov, S, L, tmp):
     """Innovation, S and NIS of one run from predicted measurements and predictive weights exp(offset)/N."""
+    R, angle = sensor.R, sensor.angle
     N, m = Zp.shape
     zhat = np.zeros(m)
     invN = 1.0 / N
@@ -214,14 +200,13 @@ def moments_run(X, e, s, mean, cov):
 
 
 @njit(cache=True, error_model="numpy")
-def _weigh_run(r, Xp, logw, logN, z, valid, hk, A, idx, scale, R, angle, thr,
-               logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, e):
-    """Measurement step of run r (module docstring); leaves exp(shifted) in e and shifted log-weights in logw_out[r]."""
+def _weigh_run(r, Xp, logw, logN, z, valid, sensor, thr, out, e):
+    """Measurement step of run r (module docstring); leaves exp(shifted) in e and shifted log-weights in out.logw[r]."""
     N, n = Xp.shape
     m = z.shape[1]
     Zp = np.empty((N, m))
     ll = np.empty(N)
-    const, measured = measure_run(hk, A, idx, scale, R, angle, Xp, z[r], valid[r], Zp, ll)
+    const, measured = measure_run(sensor, Xp, z[r], valid[r], Zp, ll)
     offset = np.empty(N)
     uniform = True
     for i in range(N):
@@ -231,8 +216,8 @@ def _weigh_run(r, Xp, logw, logN, z, valid, hk, A, idx, scale, R, angle, thr,
             uniform = False
     L = np.empty((m, m))
     tmp = np.empty(m)
-    nis[r], dof[r] = predictive_run(Zp, offset, uniform, z[r], valid[r], R, angle, innov[r], S[r], L, tmp)
-    a = logw_out[r]
+    out.nis[r], out.dof[r] = predictive_run(sensor, Zp, offset, uniform, z[r], valid[r], out.innov[r], out.S[r], L, tmp)
+    a = out.logw[r]
     for i in range(N):
         a[i] = ll[i] + offset[i]
     mx, s, s2, rst = exp_shifted_run(a, offset, not uniform, e)
@@ -240,42 +225,18 @@ def _weigh_run(r, Xp, logw, logN, z, valid, hk, A, idx, scale, R, angle, thr,
     lk = mx + ls + ((const if measured else 0.0) - logN)
     if rst:
         lk = -np.inf
-    loglik[r] = lk if measured else 0.0
-    reset[r] = rst
-    moments_run(Xp, e, s, mean[r], cov[r])
+    out.loglik[r] = lk if measured else 0.0
+    out.reset[r] = rst
+    moments_run(Xp, e, s, out.mean[r], out.cov[r])
     es = s * s / s2
-    ess[r] = es
-    need[r] = measured and (thr < 0 or es < thr * N)
+    out.ess[r] = es
+    out.need[r] = measured and (thr < 0 or es < thr * N)
     for i in range(N):
         a[i] -= ls
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _h_fast(hk, A, idx, scale, Xp, i, Zp):
-    """Zp[i] = h(Xp[i]) without per-particle array views (angle models use measure_run)."""
-    if hk == M_UNGM:
-        x = Xp[i, 0]
-        Zp[i, 0] = x * x * (1.0 / scale)
-    elif hk == M_LINEAR:
-        m, n = A.shape
-        for a in range(m):
-            acc = 0.0
-            for j in range(n):
-                acc += A[a, j] * Xp[i, j]
-            Zp[i, a] = acc
-    else:
-        s, d = A.shape
-        for a in range(s):
-            acc = 0.0
-            for j in range(d):
-                t = Xp[i, idx[j]] - A[a, j]
-                acc += t * t
-            Zp[i, a] = math.sqrt(acc) / scale
-
-
 @njit(cache=True, error_model="numpy")
-def _fast_run(r, X, logw, logN, noise, addrs, per_run, mk, F, G, par, hk, A, idx, scale, R, rkind, thr,
-              Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need):
+def _fast_run(r, X, logw, logN, noise, draws, motion, sensor, opts, out):
     """The whole step of run r when every component is measured and no component is an angle.
 
     Fused passes over the particles: (1) propagate, measure, log-weights and
@@ -283,11 +244,14 @@ def _fast_run(r, X, logw, logN, noise, addrs, per_run, mk, F, G, par, hk, A, idx
     spread; (3) covariance; (4) resampling.  Same arithmetic as the general
     path up to the order of summation.
     """
+    addrs, per_run = draws
+    rkind, thr = opts
+    R = sensor.R
     N, n = X.shape[1], X.shape[2]
     m = R.shape[0]
     Xin = X[r]
     lw = logw[r]
-    a = logw_out[r]
+    a = out.logw[r]
     Xp = np.empty((N, n))
     Zp = np.empty((N, m))
     nz = noise[r]
@@ -302,29 +266,17 @@ def _fast_run(r, X, logw, logN, noise, addrs, per_run, mk, F, G, par, hk, A, idx
     hR = np.empty(m)
     for j in range(m):
         hR[j] = -0.5 / R[j, j]
-    zvec = innov[r]  # holds z on entry (set by the caller), innovation on exit
+    zvec = out.innov[r]  # holds z on entry (set by the caller), innovation on exit
     for j in range(m):
         zr[j] = zvec[j]
     zhat = np.zeros(m)
     mx = -np.inf
-    # pass 1
-    if mk == UNGM:
-        pa, pb, forcing, sq = par[0], par[1], par[2], par[3]
+    # pass 1 (the models' fields read once, outside the particle loop)
+    mk, F, G, par = motion.kind, motion.F, motion.G, motion.par
+    hk, A, idx, scale = sensor.kind, sensor.A, sensor.idx, sensor.scale
     for i in range(N):
-        if mk == UNGM:
-            x = Xin[i, 0]
-            Xp[i, 0] = nz[i] * sq + (x * (pa + pb / (x * x + 1.0)) + forcing)
-        else:
-            q = G.shape[1]
-            for a_ in range(n):
-                acc = 0.0
-                for j in range(n):
-                    acc += F[a_, j] * Xin[i, j]
-                acc2 = 0.0
-                for j in range(q):
-                    acc2 += G[a_, j] * nz[i * q + j]
-                Xp[i, a_] = acc + acc2
-        _h_fast(hk, A, idx, scale, Xp, i, Zp)
+        propagate_point(mk, F, G, par, Xin, i, nz, Xp, i)
+        h_point(hk, A, idx, scale, Xp, i, Zp, i)
         ll = 0.0
         for j in range(m):
             d = zr[j] - Zp[i, j]
@@ -366,7 +318,7 @@ def _fast_run(r, X, logw, logN, noise, addrs, per_run, mk, F, G, par, hk, A, idx
             s += e[i]
         s2 = _sum_sq(e)
     # pass 2: weighted mean and predictive spread
-    mu = mean[r]
+    mu = out.mean[r]
     for j in range(n):
         mu[j] = 0.0
     P = np.zeros((m, m))
@@ -386,7 +338,7 @@ def _fast_run(r, X, logw, logN, noise, addrs, per_run, mk, F, G, par, hk, A, idx
     for j in range(n):
         mu[j] *= inv
     # pass 3: covariance
-    C = cov[r]
+    C = out.cov[r]
     for p in range(n):
         for q_ in range(n):
             C[p, q_] = 0.0
@@ -404,7 +356,7 @@ def _fast_run(r, X, logw, logN, noise, addrs, per_run, mk, F, G, par, hk, A, idx
             C[p, q_] *= inv
             C[q_, p] = C[p, q_]
     # innovation statistics
-    Sr = S[r]
+    Sr = out.S[r]
     tmp = np.empty(m)
     for p in range(m):
         zvec[p] = zr[p] - zhat[p]
@@ -412,18 +364,18 @@ def _fast_run(r, X, logw, logN, noise, addrs, per_run, mk, F, G, par, hk, A, idx
         for q_ in range(m):
             Sr[p, q_] = (P[p, q_] if p <= q_ else P[q_, p]) + R[p, q_]
     L = np.empty((m, m))
-    nis[r] = chol_quad(L, tmp.copy(), tmp) if cholesky_inplace(Sr, L) else np.nan
-    dof[r] = m
+    out.nis[r] = chol_quad(L, tmp.copy(), tmp) if cholesky_inplace(Sr, L) else np.nan
+    out.dof[r] = m
     ls = math.log(s)
-    loglik[r] = -np.inf if rst else mx + ls + (const - logN)
-    reset[r] = rst
+    out.loglik[r] = -np.inf if rst else mx + ls + (const - logN)
+    out.reset[r] = rst
     es = s * s / s2
-    ess[r] = es
+    out.ess[r] = es
     nd = thr < 0 or es < thr * N
-    need[r] = nd
+    out.need[r] = nd
     if nd and per_run:
         if rkind == R_SYSTEMATIC:
-            systematic_fill_rows(e, s, next_random(addrs[r]), Xp, Xout[r])
+            systematic_fill_rows(e, s, next_random(addrs[r]), Xp, out.particles[r])
             for i in range(N):
                 a[i] = -logN
         else:
@@ -432,9 +384,9 @@ def _fast_run(r, X, logw, logN, noise, addrs, per_run, mk, F, G, par, hk, A, idx
             fill_random(addrs[r], U)
             for i in range(N):
                 a[i] -= ls
-            _resample_run(r, rkind, Xp, e, U, Xout, logw_out, logN)
+            _resample_run(r, rkind, Xp, e, U, out.particles, out.logw, logN)
     else:
-        Xout[r] = Xp
+        out.particles[r] = Xp
         for i in range(N):
             a[i] -= ls
 
@@ -513,7 +465,7 @@ def _sum_sq_scaled(x, scale):
     """Σ x_i² scale (UNGM's predicted measurements h_i = x_i² / s, summed)."""
     acc = 0.0
     for i in range(x.shape[0]):
-        acc += x[i] * x[i] * scale
+        acc += ungm_h(x[i], scale)
     return acc
 
 
@@ -522,7 +474,7 @@ def _weighted_sum_sq_scaled(w, x, scale):
     """Σ w_i x_i² scale over the particles of positive weight."""
     acc = 0.0
     for i in range(w.shape[0]):
-        acc += w[i] * (x[i] * x[i] * scale) if w[i] > 0 else 0.0
+        acc += w[i] * ungm_h(x[i], scale) if w[i] > 0 else 0.0
     return acc
 
 
@@ -531,7 +483,7 @@ def _sq_scaled_dev(x, scale, c):
     """Σ (x_i² scale − c)²."""
     acc = 0.0
     for i in range(x.shape[0]):
-        d = x[i] * x[i] * scale - c
+        d = ungm_h(x[i], scale) - c
         acc += d * d
     return acc
 
@@ -541,7 +493,7 @@ def _weighted_sq_scaled_dev(w, x, scale, c):
     """Σ w_i (x_i² scale − c)² over the particles of positive weight."""
     acc = 0.0
     for i in range(w.shape[0]):
-        d = x[i] * x[i] * scale - c
+        d = ungm_h(x[i], scale) - c
         acc += w[i] * (d * d) if w[i] > 0 else 0.0
     return acc
 
@@ -565,8 +517,7 @@ def _all_uniform(lw, logN):
 
 
 @njit(cache=True, error_model="numpy")
-def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, thr,
-              Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, uniform_known, ws):
+def _ungm_run(r, X, logw, logN, noise, draws, motion, sensor, opts, out, uniform_known, ws):
     """The whole step of run r for UNGM motion and measurement (n = m = 1).
 
     Same arithmetic as :func:`_fast_run`, arranged in branch-free passes
@@ -576,10 +527,13 @@ def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, th
     says the log-weights are all −log N (the caller knows the run
     resampled), which saves checking them.
     """
+    addrs, per_run = draws
+    rkind, thr = opts
+    par, scale, Rv = motion.par, sensor.scale, sensor.R[0, 0]
     N = X.shape[1]
     xin = X[r].reshape(N)  # n = 1; a contiguous view (X[r, :, 0] is strided to numba, which stops vectorisation)
     lw = logw[r]
-    a = logw_out[r]
+    a = out.logw[r]
     xp, e, c, wp = ws[0], ws[1], ws[2], ws[3]
     if per_run:  # the noise goes where the particles will be, and is replaced by them
         fill_normal(addrs[r], xp)
@@ -590,12 +544,11 @@ def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, th
     pa, pb, forcing, sq = par[0], par[1], par[2], par[3]
     iscale = 1.0 / scale
     hR = -0.5 / Rv
-    zr = innov[r, 0]
+    zr = out.innov[r, 0]
     for i in range(N):  # propagate, predict the measurement, log-likelihood
-        x = xin[i]
-        xn = xp[i] * sq + (x * (pa + pb / (x * x + 1.0)) + forcing)
+        xn = xp[i] * sq + ungm_mean(xin[i], pa, pb, forcing)
         xp[i] = xn
-        h = xn * xn * iscale  # recomputed from xp where needed: one array less in cache
+        h = ungm_h(xn, iscale)  # recomputed from xp where needed: one array less in cache
         d = zr - h
         v = d * d * hR
         a[i] = v if v == v else -np.inf  # a NaN likelihood counts as zero
@@ -637,23 +590,23 @@ def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, th
     else:
         pz = _weighted_sq_scaled_dev(wp, xp, iscale, zhat)
     c2 = _weighted_sq_dev(e, xp, mu)
-    mean[r, 0] = mu
-    cov[r, 0, 0] = c2 * inv
+    out.mean[r, 0] = mu
+    out.cov[r, 0, 0] = c2 * inv
     nu = zr - zhat
-    innov[r, 0] = nu
+    out.innov[r, 0] = nu
     Sv = pz + Rv
-    S[r, 0, 0] = Sv
-    nis[r] = nu * nu / Sv if (Sv > 0 and math.isfinite(Sv)) else np.nan
-    dof[r] = 1
+    out.S[r, 0, 0] = Sv
+    out.nis[r] = nu * nu / Sv if (Sv > 0 and math.isfinite(Sv)) else np.nan
+    out.dof[r] = 1
     ls = math.log(s)
     const = -0.5 * (math.log(Rv) + LOG_2PI)
-    loglik[r] = -np.inf if rst else mx + ls + (const - logN)
-    reset[r] = rst
+    out.loglik[r] = -np.inf if rst else mx + ls + (const - logN)
+    out.reset[r] = rst
     es = s * s / s2
-    ess[r] = es
+    out.ess[r] = es
     nd = thr < 0 or es < thr * N
-    need[r] = nd
-    dst = Xout[r].reshape(N)
+    out.need[r] = nd
+    dst = out.particles[r].reshape(N)
     if nd and per_run and rkind == R_SYSTEMATIC:
         systematic_fill_cdf(c, next_random(addrs[r]), xp, dst)
         for i in range(N):
@@ -664,7 +617,7 @@ def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, th
         fill_random(addrs[r], U)
         for i in range(N):
             a[i] -= ls
-        _resample_run(r, rkind, xp.reshape(N, 1), e, U, Xout, logw_out, logN)
+        _resample_run(r, rkind, xp.reshape(N, 1), e, U, out.particles, out.logw, logN)
     else:
         for i in range(N):
             dst[i] = xp[i]
@@ -672,8 +625,7 @@ def _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, Rv, rkind, th
 
 
 @njit(cache=True, error_model="numpy")
-def _step_body(r, X, logw, noise, z, valid, addrs, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
-               Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, uniform_known, ws):
+def _step_body(r, X, logw, noise, z, valid, draws, motion, sensor, opts, out, uniform_known, ws):
     """Step of run r (see :func:`_pf_step`); ``ws`` (4, N) is scratch, ``uniform_known`` as in :func:`_ungm_run`."""
     N, n = X.shape[1], X.shape[2]
     logN = math.log(N)
@@ -682,32 +634,31 @@ def _step_body(r, X, logw, noise, z, valid, addrs, per_run, mk, F, G, par, hk, A
     for j in range(m):
         if not valid[r, j]:
             all_valid = False
-    if all_valid and mk == UNGM and hk == M_UNGM:
-        innov[r, 0] = z[r, 0]
-        _ungm_run(r, X, logw, logN, noise, addrs, per_run, par, scale, R[0, 0],
-                  rkind, thr, Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, uniform_known, ws)
+    if all_valid and motion.kind == UNGM and sensor.kind == M_UNGM:
+        out.innov[r, 0] = z[r, 0]
+        _ungm_run(r, X, logw, logN, noise, draws, motion, sensor, opts, out, uniform_known, ws)
         return
-    if all_valid and not angle:
-        zv = innov[r]
+    if all_valid and not sensor.angle:
+        zv = out.innov[r]
         for j in range(m):
             zv[j] = z[r, j]
-        _fast_run(r, X, logw, logN, noise, addrs, per_run, mk, F, G, par, hk, A, idx, scale, R,
-                  rkind, thr, Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need)
+        _fast_run(r, X, logw, logN, noise, draws, motion, sensor, opts, out)
         return
+    addrs, per_run = draws
+    rkind, thr = opts
     if per_run:
         fill_normal(addrs[r], noise[r])
     Xp = np.empty((N, n))
-    propagate_run(mk, F, G, par, X[r], noise[r], Xp)
+    propagate_run(motion, X[r], noise[r], Xp)
     e = np.empty(N)
-    _weigh_run(r, Xp, logw, logN, z, valid, hk, A, idx, scale, R, angle, thr,
-               logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, e)
-    if per_run and need[r]:
+    _weigh_run(r, Xp, logw, logN, z, valid, sensor, thr, out, e)
+    if per_run and out.need[r]:
         nu = n_uniforms(rkind, N)
         U = np.empty(nu)
         fill_random(addrs[r], U)
-        _resample_run(r, rkind, Xp, e, U, Xout, logw_out, logN)
+        _resample_run(r, rkind, Xp, e, U, out.particles, out.logw, logN)
     else:
-        Xout[r] = Xp
+        out.particles[r] = Xp
 
 
 @njit(cache=True, error_model="numpy")
@@ -722,47 +673,57 @@ def _resample_run(r, rkind, Xp, e, U, Xout, logw_out, logN):
         logw_out[r, i] = -logN
 
 
-def _pf_step(X, logw, noise, z, valid, addrs, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
-             Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need):
-    """One bootstrap-PF step for every run (outputs written in place); see the module docstring."""
+def _pf_step(particles, noise, obs, draws, motion, sensor, opts, out):
+    """One bootstrap-PF step for every run (outputs written in place); see the module docstring.
+
+    ``particles`` is ``(X (B, N, n), logw (B, N))``, ``noise`` (B, N·q) the
+    normals' buffer, ``obs`` ``(z (B, m), valid (B, m))``, ``draws`` a
+    :class:`~.kernel_args.Draws`, ``motion`` / ``sensor`` the packed models
+    (:mod:`.model_math`), ``opts`` a :class:`~.kernel_args.PFOptions` and
+    ``out`` a :class:`~.kernel_args.PFOutputs`.
+    """
+    X, logw = particles
+    z, valid = obs
     for rr in prange(X.shape[0]):
         r = np.int64(rr)  # prange counts in uint64
         ws = np.empty((4, X.shape[1]))
-        _step_body(r, X, logw, noise, z, valid, addrs, per_run, mk, F, G, par, hk, A, idx, scale, R, angle, rkind, thr,
-                   Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need, False, ws)
+        _step_body(r, X, logw, noise, z, valid, draws, motion, sensor, opts, out, False, ws)
 
 
-def _pf_sequence(X0, logw0, noise, zs, valids, addrs, mk, Fs, Gs, pars, hk, A, idx, scale, R, angle, rkind, thr,
-                 Xa, Xb, la, lb, means, covs, keep_cov, innov, S, nis, dof, loglik, reset, ess, need):
+def _pf_sequence(prior, noise, obs, draws, motion, sensor, opts, buffers, out, keep_cov):
     """All K steps of every run, time loop inside the run loop (outputs ``(K, B, ...)``, written in place).
 
-    Run r draws from its own stream (``addrs[r]``; the caller checked that
-    every run has one), so its steps are :func:`_step_body`'s in the same
-    order as K calls of :func:`_pf_step`: the same bits, without returning
-    to Python between steps and with the run's particles still in cache.
+    Run r draws from its own stream (``draws.addrs[r]``; the caller checked
+    that every run has one), so its steps are :func:`_step_body`'s in the
+    same order as K calls of :func:`_pf_step`: the same bits, without
+    returning to Python between steps and with the run's particles still in
+    cache.  ``prior`` is ``(X0, logw0)``; ``obs`` ``(zs (K, B, m), valids)``;
+    ``motion`` holds every step's F, G and par stacked on a first axis.
     Step k reads the particles of step k − 1 from one of the two buffers
-    ``Xa``/``Xb`` (``la``/``lb`` for the log-weights) and writes the other;
-    ``X0``/``logw0`` are the prior's.  Covariances go to ``covs[k]``, or
-    all to ``covs[0]`` where ``keep_cov`` is false.  A run that resampled
-    has log-weights of exactly −log N (every resampler writes that), which
-    the next step need not check.
+    ``buffers = (X2 (2, B, N, n), logw2 (2, B, N))`` and writes the other
+    (``out.particles`` and ``out.logw`` are not used).  Covariances go to
+    ``out.cov[k]``, or all to ``out.cov[0]`` where ``keep_cov`` is false.  A
+    run that resampled has log-weights of exactly −log N (every resampler
+    writes that), which the next step need not check.
     """
+    X0, logw0 = prior
+    zs, valids = obs
+    X2, l2 = buffers
     K = zs.shape[0]
     for rr in prange(X0.shape[0]):
         r = np.int64(rr)
         ws = np.empty((4, X0.shape[1]))
         for k in range(K):
             c = k if keep_cov else 0
-            known = k > 0 and need[k - 1, r]
+            known = k > 0 and out.need[k - 1, r]
             if k == 0:
-                Xi, li, Xo, lo = X0, logw0, Xa, la
-            elif k % 2 == 1:
-                Xi, li, Xo, lo = Xa, la, Xb, lb
+                Xi, li = X0, logw0
             else:
-                Xi, li, Xo, lo = Xb, lb, Xa, la
-            _step_body(r, Xi, li, noise, zs[k], valids[k], addrs, True, mk, Fs[k], Gs[k], pars[k], hk, A, idx, scale,
-                       R, angle, rkind, thr, Xo, lo, means[k], covs[c], innov[k], S[k], nis[k], dof[k], loglik[k],
-                       reset[k], ess[k], need[k], known, ws)
+                Xi, li = X2[(k + 1) % 2], l2[(k + 1) % 2]
+            step_out = PFOutputs(X2[k % 2], l2[k % 2], out.mean[k], out.cov[c], out.innov[k], out.S[k], out.nis[k],
+                                 out.dof[k], out.loglik[k], out.reset[k], out.ess[k], out.need[k])
+            step_motion = Motion(motion.kind, motion.F[k], motion.G[k], motion.par[k])
+            _step_body(r, Xi, li, noise, zs[k], valids[k], draws, step_motion, sensor, opts, step_out, known, ws)
 
 
 def _pf_resample(logw_out, need, U, rkind, Xout):

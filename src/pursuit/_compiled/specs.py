@@ -20,12 +20,19 @@ Measurement
 Everything else (a user's model, a maneuvering-target model) is computed
 with NumPy: the ``*_spec`` functions return a reason string instead of a
 spec, which the filter puts in its :class:`pursuit.compute.CompiledBackendWarning`.
+
+The tables :data:`MOTIONS` and :data:`MEASUREMENTS` are the registrations:
+a model type is compiled exactly when it is a key there.  The kernels
+receive a spec packed as :class:`~pursuit._compiled.kernel_args.Motion` /
+:class:`~pursuit._compiled.kernel_args.Sensor` and evaluate it in
+:mod:`pursuit._compiled.model_math`, which dispatches on the ``kind`` code
+below (docs/compiled-backend.md, "Adding a compiled sensor").
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -33,17 +40,26 @@ from ..models.linear_motion import LinearMotion
 from ..models.measurement import LinearGaussian, RangeBearing, RangeSensors, TimeOfArrival
 from ..models.motion import ConstantAcceleration, ConstantVelocity
 from ..models.ungm import UNGMMeasurement, UNGMMotion
+from .kernel_args import Motion, Sensor
 
-__all__ = ["MotionSpec", "MeasurementSpec", "motion_spec", "measurement_spec"]
+__all__ = ["MotionSpec", "MeasurementSpec", "motion_spec", "measurement_spec", "MOTIONS", "MEASUREMENTS"]
 
-# motion kinds
+# motion kinds (model_math dispatches on them; compiled code freezes them as constants)
 LINEAR = 0
 UNGM = 1
-# measurement kinds
+# measurement kinds (sensor codes)
 M_LINEAR = 0
 M_UNGM = 1
 M_RANGE = 2
 M_RANGE_BEARING = 3
+
+#: The motion models with a compiled form: exact type -> motion kind.
+MOTIONS: dict[type, int] = {
+    ConstantVelocity: LINEAR,
+    ConstantAcceleration: LINEAR,
+    LinearMotion: LINEAR,
+    UNGMMotion: UNGM,
+}
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,6 +92,15 @@ class MotionSpec:
     def cov(self, k: int, dt: float | None) -> np.ndarray:
         """Process-noise covariance Q of step ``k``."""
         return np.asarray(self.model.cov(k) if dt is None else self.model.cov(k, dt=dt), dtype=float)
+
+    def kernel_args(self, k: int, dt: float | None) -> Motion:
+        """Step ``k`` packed for the kernels."""
+        return Motion(self.kind, *self.arrays(k, dt))
+
+    def sequence_args(self, steps: int) -> Motion:
+        """Steps 1 … ``steps`` (the model's own ``dt``) packed for the sequence kernels: F, G, par stacked on a first axis."""
+        parts = zip(*(self.arrays(k, None) for k in range(1, steps + 1)))
+        return Motion(self.kind, *(np.ascontiguousarray(np.stack(p)) for p in parts))
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,38 +139,65 @@ class MeasurementSpec:
         """Measurement dimension m."""
         return self.R.shape[0]
 
+    def kernel_args(self) -> Sensor:
+        """The spec packed for the kernels."""
+        return Sensor(self.kind, self.A, self.idx, self.scale, self.R, self.angle)
+
 
 def motion_spec(motion: Any) -> MotionSpec | str:
     """The compiled form of a motion model, or the reason there is none."""
     t = type(motion)
-    if t is UNGMMotion:
-        return MotionSpec(UNGM, motion)
-    if t in (ConstantVelocity, ConstantAcceleration, LinearMotion):
-        return MotionSpec(LINEAR, motion)
-    return f"motion model {t.__name__} (compiled: ConstantVelocity, ConstantAcceleration, LinearMotion, UNGMMotion)"
+    kind = MOTIONS.get(t)
+    if kind is None:
+        return f"motion model {t.__name__} (compiled: {', '.join(c.__name__ for c in MOTIONS)})"
+    return MotionSpec(kind, motion)
+
+
+# ---------------------------------------------------------------------------
+# measurement models: one builder per model type, registered in MEASUREMENTS
+# ---------------------------------------------------------------------------
+_NO_INDEX = np.zeros(1, dtype=np.int64)
+
+
+def _linear_spec(h: LinearGaussian, R: np.ndarray, diagonal: bool) -> MeasurementSpec:
+    return MeasurementSpec(M_LINEAR, np.ascontiguousarray(h.H), _NO_INDEX, 1.0, R, diagonal, False)
+
+
+def _ranges_spec(h: RangeSensors | TimeOfArrival, R: np.ndarray, diagonal: bool) -> MeasurementSpec:
+    c = float(h.c) if type(h) is TimeOfArrival else 1.0
+    idx = np.asarray(h.position_indices, dtype=np.int64)
+    return MeasurementSpec(M_RANGE, np.ascontiguousarray(h.anchors), idx, c, R, diagonal, False)
+
+
+def _range_bearing_spec(h: RangeBearing, R: np.ndarray, diagonal: bool) -> MeasurementSpec:
+    idx = np.asarray(h.position_indices, dtype=np.int64)
+    return MeasurementSpec(M_RANGE_BEARING, np.asarray(h.sensor, dtype=float).reshape(1, 2), idx, 1.0, R, diagonal, True)
+
+
+def _ungm_spec(h: UNGMMeasurement, R: np.ndarray, diagonal: bool) -> MeasurementSpec:
+    return MeasurementSpec(M_UNGM, np.ones((1, 1)), _NO_INDEX, float(h.scale), R, diagonal, False)
+
+
+#: The measurement models with a compiled form: exact type -> spec builder ``(model, R, diagonal) -> spec``.
+#: A new compiled sensor adds its builder here and its maths to :mod:`pursuit._compiled.model_math`.
+MEASUREMENTS: dict[type, Callable[[Any, np.ndarray, bool], MeasurementSpec]] = {
+    LinearGaussian: _linear_spec,
+    RangeSensors: _ranges_spec,
+    TimeOfArrival: _ranges_spec,
+    RangeBearing: _range_bearing_spec,
+    UNGMMeasurement: _ungm_spec,
+}
 
 
 def measurement_spec(measurement: Any) -> MeasurementSpec | str:
     """The compiled form of a measurement model, or the reason there is none."""
     t = type(measurement)
-    R = np.ascontiguousarray(np.asarray(measurement.cov(None), dtype=float)) if hasattr(measurement, "cov") else None
-    diagonal = R is not None and np.count_nonzero(R - np.diag(np.diag(R))) == 0
-    none_i = np.zeros(1, dtype=np.int64)
-    if t is LinearGaussian:
-        return MeasurementSpec(M_LINEAR, np.ascontiguousarray(measurement.H), none_i, 1.0, R, diagonal, False)
-    if t is UNGMMeasurement:
-        return MeasurementSpec(M_UNGM, np.ones((1, 1)), none_i, float(measurement.scale), R, diagonal, False)
-    if t in (RangeSensors, TimeOfArrival):
-        c = float(measurement.c) if t is TimeOfArrival else 1.0
-        idx = np.asarray(measurement.position_indices, dtype=np.int64)
-        return MeasurementSpec(M_RANGE, np.ascontiguousarray(measurement.anchors), idx, c, R, diagonal, False)
-    if t is RangeBearing:
-        idx = np.asarray(measurement.position_indices, dtype=np.int64)
-        return MeasurementSpec(M_RANGE_BEARING, np.asarray(measurement.sensor, dtype=float).reshape(1, 2), idx, 1.0, R, diagonal, True)
-    return (
-        f"measurement model {t.__name__} (compiled: LinearGaussian, RangeSensors, TimeOfArrival, RangeBearing, "
-        "UNGMMeasurement)"
-    )
+    build = MEASUREMENTS.get(t)
+    if build is None:
+        return f"measurement model {t.__name__} (compiled: {', '.join(c.__name__ for c in MEASUREMENTS)})"
+    R = np.ascontiguousarray(np.asarray(measurement.cov(None), dtype=float))
+    diagonal = np.count_nonzero(R - np.diag(np.diag(R))) == 0
+    return build(measurement, R, bool(diagonal))
 
 
 def model_specs(motion: Any, measurement: Any, need_diagonal: bool) -> tuple[MotionSpec, MeasurementSpec] | str:
