@@ -74,6 +74,17 @@ def test_filters_without_a_compiled_path_warn_only_when_numba_is_asked_for(monke
         compute.set_default_backend(None)
 
 
+def test_filters_without_a_compiled_path_ignore_a_numba_default_without_numba(monkeypatch):
+    """The CS filters and the IMM had no backend before the common base: a process default of numba
+    (even with numba missing, or a bad name in the environment) must not stop them being built."""
+    monkeypatch.setattr(compute, "numba_available", lambda: False)
+    monkeypatch.setenv(compute.ENV_VAR, "numba")
+    assert CurrentStatisticalFilter(AXES).backend == "numpy"
+    assert InteractingMultipleModel([pu.KalmanFilter(CV, POS, backend="numpy")]).backend == "numpy"
+    with pytest.raises(ImportError, match=r"pursuit\[fast\]"):
+        CurrentStatisticalFilter(AXES, backend="numba")  # asked for explicitly: the clear error
+
+
 def test_batch_from_the_prior():
     prior = pu.Gaussian(np.zeros((3, 4)), np.eye(4))
     assert prior_batch(prior) == (3,)

@@ -139,8 +139,13 @@ class FilterBase:
     def _select_backend(self) -> None:
         """Resolve ``backend``; for ``"numba"`` find the compiled form of the models, or warn and use NumPy."""
         explicit = self.backend is not None
-        object.__setattr__(self, "backend", resolve_backend(self.backend))
         object.__setattr__(self, "_specs", None)
+        if not explicit and not self.warn_on_default_backend:
+            # A family with no compiled path at all computes with NumPy whatever the process default
+            # says: the default (even "numba" without numba installed) is not a request to it.
+            object.__setattr__(self, "backend", "numpy")
+            return
+        object.__setattr__(self, "backend", resolve_backend(self.backend))
         if self.backend != "numba":
             return
         reason = self._compiled_unsupported()
