@@ -17,7 +17,7 @@ An output folder written by ``pursuit run`` / ``pursuit reproduce`` (see
 * ``figures/NAME.png`` and ``.pdf``; ``report.html``.
 
 :func:`load` reads such a folder back into an
-:class:`~pursuit.experiment.ExperimentOutput` whose ``results`` are the
+:class:`~pursuit.tables.ExperimentOutput` whose ``results`` are the
 result objects.
 """
 

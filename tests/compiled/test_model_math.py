@@ -94,3 +94,19 @@ def test_propagation_matches_the_numpy_model(cls):
     out = np.empty_like(X)
     _propagate_all(motion, X, np.zeros(32 * motion.G.shape[1]), out)  # noise-free: the transition itself
     np.testing.assert_allclose(out, model.f(X, 3), rtol=1e-13, atol=1e-12)
+
+
+def test_a_sensor_code_without_its_branch_gives_nan_not_another_sensors_formula():
+    from pursuit._compiled.model_math import h_point, jac_point
+
+    unknown = max(specs.M_LINEAR, specs.M_RANGE, specs.M_RANGE_BEARING, specs.M_UNGM) + 1
+    A = np.array([[0.0, 0.0], [10.0, 0.0]])
+    idx = np.array([0, 1])
+    X = np.array([[3.0, 4.0]])
+    out = np.zeros((1, 2))
+    H = np.zeros((1, 2, 2))
+    h_point(unknown, A, idx, 1.0, X, 0, out, 0)
+    jac_point(unknown, A, idx, 1.0, X, 0, H, 0)
+    assert np.isnan(out).all() and np.isnan(H).all()
+    h_point(specs.M_RANGE, A, idx, 1.0, X, 0, out, 0)  # the same arguments do reach a real branch
+    assert np.allclose(out, [[5.0, np.hypot(7.0, 4.0)]])

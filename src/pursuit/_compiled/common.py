@@ -216,27 +216,6 @@ def chol_quad(L, v, tmp):
     return tot
 
 
-@njit(cache=True, error_model="numpy")
-def spd_inverse(L, out):
-    """(L Lᵀ)⁻¹ into ``out`` from a lower Cholesky factor."""
-    m = L.shape[0]
-    # invert L (lower triangular) into out, then out = L⁻ᵀ L⁻¹
-    Li = np.zeros((m, m))
-    for j in range(m):
-        Li[j, j] = 1.0 / L[j, j]
-        for i in range(j + 1, m):
-            acc = 0.0
-            for p in range(j, i):
-                acc -= L[i, p] * Li[p, j]
-            Li[i, j] = acc / L[i, i]
-    for i in range(m):
-        for j in range(m):
-            acc = 0.0
-            for p in range(max(i, j), m):
-                acc += Li[p, i] * Li[p, j]
-            out[i, j] = acc
-
-
 # --------------------------------------------------------------------------
 # resampling: copy counts of one run from its weights (unnormalised) and uniforms
 # --------------------------------------------------------------------------

@@ -11,7 +11,8 @@ The arithmetic follows :mod:`pursuit.filters.gaussian` (predict
 Joseph form through a Cholesky factor L of P⁻: ``A_L A_Lᵀ + K (R + D) Kᵀ``
 with ``A_L = L − K (H L)``, where H L is the Jacobian times L for the
 KF/EKF (D = 0) and ``Gᵀ = (L⁻¹ Pxz)ᵀ`` summed from the sigma points, with D
-their linearisation-error covariance, for the UKF/CKF; a run that measures
+their linearisation-error covariance, for the UKF/CKF (the NumPy UKF/CKF
+form the sum as one Gram matrix; here it is still the product); a run that measures
 nothing keeps P⁻ itself).  A run whose
 covariance or innovation covariance does not factor (the NumPy filters
 would repair it) is flagged in ``ok`` and recomputed by the caller with

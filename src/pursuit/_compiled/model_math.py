@@ -34,7 +34,7 @@ import math
 
 from numba import njit
 
-from .specs import LINEAR, M_LINEAR, M_RANGE, M_RANGE_BEARING, M_UNGM, UNGM  # noqa: F401 (frozen into the compiled code)
+from .specs import M_LINEAR, M_RANGE, M_RANGE_BEARING, M_UNGM, UNGM  # frozen into the compiled code as constants
 
 __all__ = ["propagate_row", "propagate_point", "h_row", "h_point", "jac_row", "jac_point", "ungm_mean", "ungm_h"]
 
@@ -176,8 +176,11 @@ def h_point(kind, A, idx, scale, X, i, out, o):
         h_linear(A, idx, scale, X, i, out, o)
     elif kind == M_RANGE:
         h_range(A, idx, scale, X, i, out, o)
-    else:
+    elif kind == M_RANGE_BEARING:
         h_range_bearing(A, idx, scale, X, i, out, o)
+    else:  # a sensor code without its branch here: NaN, never another sensor's formula
+        for a in range(out.shape[1]):
+            out[o, a] = math.nan
 
 
 @njit(**_NJ)
@@ -193,8 +196,12 @@ def jac_point(kind, A, idx, scale, X, i, H, o):
         jac_linear(A, idx, scale, X, i, H, o)
     elif kind == M_RANGE:
         jac_range(A, idx, scale, X, i, H, o)
-    else:
+    elif kind == M_RANGE_BEARING:
         jac_range_bearing(A, idx, scale, X, i, H, o)
+    else:  # a sensor code without its branch here: NaN, never another sensor's Jacobian
+        for a in range(m):
+            for j in range(n):
+                H[o, a, j] = math.nan
 
 
 @njit(**_NJ)

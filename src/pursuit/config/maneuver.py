@@ -240,7 +240,7 @@ def _singer(scenario, where="filter", *, name: str, alpha: float, sigma: float |
     s = _singer_sigma(where, sigma, a_max, p_max, p_zero)
     return _reanchor(
         where,
-        lambda: KalmanFilter(mm.Singer(alpha=alpha, sigma=s, ndim=axes, dt=scenario.dt), scenario.measurement, name=name, gate=gate),
+        lambda: KalmanFilter(mm.Singer(alpha=alpha, sigma=s, ndim=axes, dt=scenario.dt), scenario.measurement, name=name or "Singer", gate=gate),
     )
 
 
@@ -288,7 +288,7 @@ def _imm_singer(scenario, where="filter", *, name: str, models, transition, init
         # the mode's name in legends: the time constant reads better than α = 0.0166667 (1/s)
         label = f"Singer τ = {1 / a:.3g} s, σ = {s:.3g} m/s²" if a > 0 else f"Singer α = 0, σ = {s:.3g} m/s²"
         filters.append(KalmanFilter(model, scenario.measurement, name=label))
-    return _reanchor(where, lambda: InteractingMultipleModel(filters, transition, initial_probs, name=name, gate=gate))
+    return _reanchor(where, lambda: InteractingMultipleModel(filters, transition, initial_probs, name=name or "IMM-Singer", gate=gate))
 
 
 @register(

@@ -19,7 +19,11 @@ propagate a Gaussian through the motion model and the measurement model:
   (``L`` the points' Cholesky factor, ``G = L⁻¹ Pxz`` summed from the
   points), so neither ``L⁻¹`` nor a product with an ill-conditioned ``P⁻``
   is formed: a last-bit change of the inputs after a long gap cannot turn
-  it indefinite.
+  it indefinite.  The whole update is formed as one Gram matrix
+  ``W Wᵀ`` with ``W = [A_L, K C, K Eᵀ]`` (``C Cᵀ = R``, ``Eᵀ E = D``): the
+  product ``K (R + D) Kᵀ`` cancels when a large gain nearly annuls a large
+  linearisation error, and its round-off then exceeds the smallest
+  eigenvalue (UKF with TOA after a 500 s gap).
 
 Any Gaussian filter can gate outliers: with ``gate=p`` a measurement whose
 NIS exceeds the χ²(dof) quantile ``p`` is not used (that run only predicts)
