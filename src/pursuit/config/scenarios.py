@@ -25,7 +25,7 @@ _PRIOR_MEAN_DOC = "initial estimate: drawn from N(x0, P0) or x0 itself"
     "2-D constant-velocity target ranged by fixed WSN anchors; state [x, vx, y, vy]",
     params=params_from(
         WSNRange,
-        ["anchors", "sigma", "steps", "dt", "q", "noise", "x0", "P0", "prior_mean"],
+        ["anchors", "sigma", "steps", "dt", "q", "noise", "x0", "P0", "prior_mean", "sensing_radius", "p_detect"],
         types={"anchors": "matrix", "P0": "matrix"},
         docs={
             "anchors": "anchor positions [[x, y], ...], m",
@@ -37,6 +37,8 @@ _PRIOR_MEAN_DOC = "initial estimate: drawn from N(x0, P0) or x0 itself"
             "x0": "true initial state [x, vx, y, vy]",
             "P0": "prior covariance (matrix or diagonal)",
             "prior_mean": _PRIOR_MEAN_DOC,
+            "sensing_radius": "a node measures only a target within this range, m (inf: always); else its range is NaN",
+            "p_detect": "probability that a node within range detects the target at a step, (0, 1]",
         },
     ),
     target=WSNRange,
