@@ -20,6 +20,19 @@ Sections (besides ``[experiment]``):
     The paper's numbers: ``filter``, ``metric`` (a summary column), ``value``,
     ``at`` (the swept value), ``variant`` and ``note``; printed beside ours in
     a ``Table(kind="paper")``.
+``[limit]``
+    Optional: a reference filter (``filter``, a filter table such as
+    ``{ type = "pf", particles = 20000 }``) run once per variant with
+    ``runs_factor`` times the runs, whose headline RMSE approximates the
+    MMSE limit, the lowest mean error any filter can reach.  Its row is in
+    the summary and the paper table, and a line in the RMSE figures.
+``[[claim]]``
+    Optional: the paper's claims, each given a verdict line from the
+    measured numbers (see :func:`order_verdict`, :func:`value_verdict`):
+    an ordering (``order = ["ICS-PF", "CS-PF", "PF"]``: each more accurate
+    than the next, by paired 95 % intervals, at ``at`` or every swept value)
+    or a value (``filter``, ``metric``, ``at``, ``value``; the value may be
+    left to the matching ``[[paper]]`` entry).
 
 Every value and variant uses the same root seed, so all filters at all
 values see the same truth and measurements (common random numbers) and the
@@ -36,7 +49,8 @@ from typing import Any
 import numpy as np
 
 from .. import metrics, registry
-from ..config.build import build_filters, build_scenario, resolve_paper, resolve_section
+from ..compute import numba_available
+from ..config.build import build_filter, build_filters, build_scenario, resolve_paper, resolve_section
 from ..engine.montecarlo import FILTER_STREAM, SCENARIO_STREAM, monte_carlo
 from ..engine.snapshots import particle_snapshots
 from ..registry import Param, register
@@ -51,7 +65,7 @@ from ..rng import run_streams
 from ..tables import ExperimentOutput, Table
 from .montecarlo import check_run_exists, run_index
 
-__all__ = ["SweepPlan", "run_metric", "paired_difference"]
+__all__ = ["SweepPlan", "run_metric", "paired_difference", "order_verdict", "value_verdict"]
 
 
 def _values(field_name: str, v: Any) -> list:
@@ -87,6 +101,12 @@ def _str_list(field_name: str, v: Any) -> list[str]:
     return list(v)
 
 
+def _at_least_one(field_name: str, v: Any) -> int:
+    if v < 1:
+        raise ValueError(f"{field_name}: must be at least 1, got {v}")
+    return v
+
+
 SWEEP_PARAMS = (
     Param("parameter", "str", doc="filter parameter to sweep (e.g. particles, fraction)"),
     Param("values", "any", doc="the values to run", check=_values),
@@ -104,6 +124,26 @@ FIGURE_PARAMS = (
     Param("snapshot_steps", "any", [], "steps whose particle clouds are drawn", check=_int_list),
     Param("snapshot_value", "float", None, "swept value whose particle clouds are drawn (default: the last)"),
     Param("axis_label", "str", "", "name of the swept value on figure axes (default: 'PARAMETER LABEL', e.g. 'particles N')"),
+    Param("variants", "any", [], "scenario variants (labels) that get one-run figures (default: the first)", check=_str_list),
+    Param("paper_label", "str", "paper", "legend name of the paper's values marked in the RMSE figures, e.g. 'paper (Table 1)'"),
+    Param("paper_on_every_variant", "bool", False, "mark the paper's values in every variant's RMSE figure, named with their own variant"),
+)
+
+LIMIT_PARAMS = (
+    Param("filter", "any", doc='the reference filter\'s table, e.g. { type = "pf", particles = 20000 }'),
+    Param("runs_factor", "int", 2, "its runs: this many times the experiment's runs (2: 200 runs with the file's 100)", check=_at_least_one),
+    Param("backend", "str", "auto", "its compute backend; auto: numba when installed, else the process default", choices=("auto", "numpy", "numba")),
+    Param("label", "str", "", "its row's name (default: 'MMSE limit (PF, N = 20 000, 200 runs)')"),
+)
+
+CLAIM_PARAMS = (
+    Param("order", "any", [], 'an ordering claim: filters from most to least accurate, e.g. ["ICS-PF", "CS-PF", "PF"]', check=_str_list),
+    Param("filter", "str", "", "a value claim: the filter whose number the paper gives"),
+    Param("metric", "str", "rmse", "the value claim's summary column (rmse, rms_<state>, rmse_position, rmse_velocity)"),
+    Param("value", "float", None, "the paper's number (default: the matching [[paper]] entry's)"),
+    Param("at", "float", None, "the swept value (an ordering: default every swept value)"),
+    Param("variant", "str", "", "the scenario variant (label) the claim is checked on"),
+    Param("source", "str", "", "where the claim is made (default: the matching [[paper]] note)"),
 )
 
 PAPER_PARAMS = (
@@ -150,6 +190,65 @@ def paired_difference(a: np.ndarray, b: np.ndarray) -> tuple[float, float, str]:
     return mean, half, verdict
 
 
+def _num(v: float, sign: bool = False) -> str:
+    """Three significant digits, a true minus sign; ``sign``: always a sign."""
+    text = f"{v:+.3g}" if sign else f"{v:.3g}"
+    return text.replace("-", "\u2212")
+
+
+def order_verdict(diffs: list[tuple[str, str, str, float, float]]) -> tuple[str, str]:
+    """The verdict on "each filter is more accurate than the next" from paired differences.
+
+    Parameters
+    ----------
+    diffs
+        One ``(where, A, B, mean, half)`` per asserted ``A < B`` (``where``
+        names the swept value, e.g. ``"N = 100"``): the mean over runs of
+        A's error minus B's, and its 95 % half-width.
+
+    Returns
+    -------
+    verdict, because
+        ``"reproduced"`` when every interval lies below 0 (``because``: the
+        weakest of them); ``"not reproduced"`` when some interval lies above 0
+        (the largest such difference); else ``"not shown"`` (an interval
+        holds 0; the one reaching highest).
+    """
+    if not diffs:
+        raise ValueError("diffs: no paired differences to judge")
+
+    def line(d: tuple[str, str, str, float, float]) -> str:
+        where, a, b, mean, half = d
+        return f"{a} \u2212 {b} = {_num(mean, True)} [{_num(mean - half)}, {_num(mean + half)}] at {where}"
+
+    against = [d for d in diffs if d[3] - d[4] > 0]
+    if against:
+        return "not reproduced", line(max(against, key=lambda d: d[3]))
+    weakest = max(diffs, key=lambda d: d[3] + d[4])
+    if weakest[3] + weakest[4] < 0:
+        return "reproduced", "weakest: " + line(weakest)
+    return "not shown", line(weakest) + " (the interval holds 0)"
+
+
+def value_verdict(
+    value: float, measured: float, half: float, limit: float | None = None, limit_half: float | None = None
+) -> tuple[str, str]:
+    """The verdict on a paper's error value against ours and, if given, the MMSE limit.
+
+    ``"not reachable"`` when ``value`` lies below the limit's interval
+    ``limit − limit_half`` (no filter has a lower mean error); else
+    ``"reproduced"`` when ``|measured − value| ≤ √2·half`` (the 95 % interval
+    of the difference of two Monte Carlo means, the paper's as noisy as
+    ours); else ``"not reproduced"``.  ``because`` gives the numbers.
+    """
+    if limit is not None and value < limit - (limit_half or 0.0):
+        return "not reachable", f"below the MMSE limit {_num(limit)} [{_num(limit - (limit_half or 0.0))}, {_num(limit + (limit_half or 0.0))}]"
+    ours = f"measured {_num(measured)} \u00b1 {_num(half)}"
+    if math.isfinite(half) and abs(measured - value) <= math.sqrt(2.0) * half:
+        return "reproduced", ours
+    return "not reproduced", ours + (" (the paper's is lower)" if value < measured else " (the paper's is higher)")
+
+
 def _fmt_value(v: float) -> str:
     return f"{v:g}"
 
@@ -171,6 +270,8 @@ class SweepPlan:
     paper: list[dict[str, Any]]
     variants: list[dict[str, Any]]
     swept: list[bool]
+    limit: dict[str, Any] | None = None
+    claims: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def label(self) -> str:
@@ -209,6 +310,29 @@ class SweepPlan:
             for i, value in enumerate(self.sweep["values"]):
                 self._filters(scenario, value, baselines=i == 0)
 
+    def _limit_filter(self, scenario: Any, runs: int) -> Any:
+        """The ``[limit]`` filter, named by its label (which says its N and runs)."""
+        lim = self.limit
+        table = dict(lim["filter"])
+        backend = lim["backend"]
+        if backend == "auto":  # the limit is the costly row: compiled whenever numba is there
+            backend = "numba" if numba_available() else None
+        if backend is not None:
+            table["backend"] = backend
+        name = lim["label"]
+        if not name:
+            filt = build_filter(table, scenario, "limit.filter")
+            n = getattr(filt, "particles", None)
+            size = "" if n is None else ", N = " + f"{n:,}".replace(",", " ")
+            name = f"MMSE limit ({filt.name}{size}, {runs} runs)"
+        return build_filter({**table, "name": name}, scenario, "limit.filter")
+
+    def _figure_variants(self) -> list[str]:
+        """Labels of the variants that get one-run figures (``""`` without variants)."""
+        if not self.variants:
+            return [""]
+        return self.figure_opts["variants"] or [self.variants[0]["label"]]
+
     # -- running -------------------------------------------------------------------
     def check_runs(self, runs: int) -> None:
         """Raise ``ValueError`` (naming the field) when an option refers to a run beyond ``runs``."""
@@ -221,7 +345,10 @@ class SweepPlan:
         rows: list[dict[str, Any]] = []
         per_run: dict[tuple[str, Any, str], np.ndarray] = {}
         results: dict[str, MonteCarloResult] = {}
-        first_results: dict[Any, tuple[Any, MonteCarloResult]] = {}
+        measured_in: dict[tuple[str, Any, str], MonteCarloResult] = {}  # (variant, value or None, filter) -> result
+        limits: dict[str, tuple[str, MonteCarloResult]] = {}
+        drawn = self._figure_variants()
+        fig_results: dict[str, dict[Any, tuple[Any, MonteCarloResult]]] = {v: {} for v in drawn}
         for variant in self.variants or [None]:
             vlabel = variant["label"] if variant else ""
             scenario = self._scenario(variant)
@@ -235,22 +362,38 @@ class SweepPlan:
                 )
                 key = f"{vlabel}|{self.label}={_fmt_value(value)}" if vlabel else f"{self.label}={_fmt_value(value)}"
                 results[key] = result
-                if variant is None or variant is self.variants[0]:
-                    first_results[value] = (scenario, result)
+                if vlabel in fig_results:
+                    fig_results[vlabel][value] = (scenario, result)
                 for filt, swept in built:
                     e, head, half = run_metric(result, filt.name, sw["component"], sw["metric"])
                     at = value if swept else None
                     per_run[(vlabel, at, filt.name)] = e
+                    measured_in[(vlabel, at, filt.name)] = result
                     if not swept:  # baselines are compared at every value
                         for v in sw["values"]:
                             per_run[(vlabel, v, filt.name)] = e
                     rows.append(self._row(result, filt.name, vlabel, at, head, half))
+            if self.limit is not None:
+                limit_runs = runs * self.limit["runs_factor"]
+                filt = self._limit_filter(scenario, limit_runs)
+                # the same root seed: its first runs see the very truths the filters above saw
+                result = monte_carlo(
+                    scenario, [filt], limit_runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections,
+                    store="full", label=" ".join(filter(None, (self.name, vlabel, "MMSE limit"))),
+                )
+                results[f"{vlabel}|limit" if vlabel else "limit"] = result
+                limits[vlabel] = (filt.name, result)
+                _, head, half = run_metric(result, filt.name, sw["component"], sw["metric"])
+                rows.append(self._row(result, filt.name, vlabel, None, head, half))
         tables = [self._summary_table(rows)]
-        if self.paper:
-            tables.append(self._paper_table(rows))
+        if self.paper or limits:
+            tables.append(self._paper_table(rows, limits))
+        if self.claims:
+            tables.append(self._claims_table(rows, per_run, measured_in, limits, runs))
         if sw["pairs"]:
             tables.append(self._pairs_table(per_run))
-        figures = self._figures(rows, first_results, seed)
+        limit_names = {name for name, _ in limits.values()}
+        figures = self._figures(rows, fig_results, seed, limit_names)
         return ExperimentOutput(self.name, "", "", tables, figures, results=results)
 
     def _row(self, result: MonteCarloResult, name: str, variant: str, at: Any, head: float, half: float) -> dict[str, Any]:
@@ -302,7 +445,7 @@ class SweepPlan:
                 return r
         return None
 
-    def _paper_table(self, rows: list[dict[str, Any]]) -> Table:
+    def _paper_table(self, rows: list[dict[str, Any]], limits: dict[str, tuple[str, MonteCarloResult]]) -> Table:
         out = []
         for p in self.paper:
             r = self._lookup(rows, p["filter"], p["at"], p["variant"])
@@ -311,6 +454,12 @@ class SweepPlan:
             line = [p["variant"]] if self.variants else []
             at = p["at"] if r is None or r[self.label] is None else r[self.label]  # as written in [sweep]
             out.append(line + [at, p["filter"], p["metric"], p["value"], measured, ratio, p["note"]])
+        for variant, (name, _) in limits.items():
+            r = self._lookup(rows, name, None, variant)
+            line = [variant] if self.variants else []
+            out.append(line + [None, name, "rmse", None, r["rmse"], None,
+                               "the lowest mean error any filter can reach here (a PF with many particles approximates "
+                               f"the MMSE estimator); rmse \u00b1 {r['ci95']:.2g} (95 %)"])
         cols = (["variant"] if self.variants else []) + [self.label, "filter", "metric", "paper", "measured", "measured/paper", "note"]
         return Table(
             "paper_vs_measured",
@@ -321,6 +470,59 @@ class SweepPlan:
             "where the paper's set-up is unreadable (see docs/papers.md).",
             kind="paper",
         )
+
+    def _claims_table(self, rows, per_run, measured_in, limits, runs: int) -> Table:
+        """One verdict line per ``[[claim]]``, from the measured numbers (see :func:`order_verdict`, :func:`value_verdict`)."""
+        sw = self.sweep
+        out = []
+        for c in self.claims:
+            v = c["variant"]
+            if c["order"]:
+                values = [x for x in sw["values"] if c["at"] is None or float(x) == float(c["at"])]
+                diffs = []
+                for at in values:
+                    for a, b in zip(c["order"], c["order"][1:]):
+                        mean, half, _ = paired_difference(per_run[(v, at, a)], per_run[(v, at, b)])
+                        diffs.append((f"{self.label} = {_fmt_value(at)}", a, b, mean, half))
+                where = f"at every {self.label}" if c["at"] is None else f"at {self.label} = {_fmt_value(c['at'])}"
+                text = f"{' < '.join(c['order'])} in {sw['component']} RMSE {where}"
+                verdict, because = order_verdict(diffs)
+            else:
+                measured, half = self._claim_measure(rows, measured_in, c["filter"], c["at"], v, c["metric"])
+                limit = limit_half = None
+                if v in limits:
+                    name, res = limits[v]
+                    limit, lh = self._claim_measure(rows, {(v, None, name): res}, name, None, v, c["metric"])
+                    # the paper's own mean has Monte Carlo noise too (as many runs as ours)
+                    limit_half = lh * math.sqrt(1.0 + res.runs / runs)
+                at = "" if c["at"] is None else f" at {self.label} = {_fmt_value(c['at'])}"
+                metric = "" if c["metric"] == "rmse" else f" {c['metric']}"
+                text = f"{c['filter']}'s{metric} {c['value']:g}{at}" + (f" ({c['source']})" if c["source"] else "")
+                verdict, because = value_verdict(c["value"], measured, half, limit, limit_half)
+            out.append(([v] if self.variants else []) + [text, verdict, because])
+        cols = (["variant"] if self.variants else []) + ["claim", "verdict", "because"]
+        return Table(
+            "claims",
+            "The paper's claims, judged from the measured numbers",
+            cols,
+            out,
+            "An ordering A < B < ... is reproduced when every paired 95 % interval of A − B (per-run RMSEs, same runs) lies "
+            "below 0, not reproduced when one lies above 0, else not shown. A value is reproduced when it lies within "
+            "\u221a2 \u00d7 our 95 % half-width of our mean (both means carry Monte Carlo noise), not reachable when it lies "
+            "below the MMSE limit's interval.",
+            kind="paper",
+        )
+
+    def _claim_measure(self, rows, measured_in, filt: str, at: Any, variant: str, metric: str) -> tuple[float, float]:
+        """A claim's measured value and its 95 % half-width: the headline ``rmse``, or a pooled RMS column."""
+        if metric == "rmse":
+            r = self._lookup(rows, filt, at, variant)
+            return r["rmse"], r["ci95"]
+        result = next(res for (v, x, f), res in measured_in.items()
+                      if v == variant and f == filt and (x is None or at is None or float(x) == float(at)))
+        component = metric[len("rmse_"):] if metric.startswith("rmse_") else metric[len("rms_"):]
+        _, value, half = run_metric(result, filt, component, "pooled")
+        return value, half
 
     def _pairs_table(self, per_run: dict[tuple[str, Any, str], np.ndarray]) -> Table:
         out = []
@@ -343,20 +545,24 @@ class SweepPlan:
         )
 
     # -- figures -------------------------------------------------------------------
-    def _figures(self, rows, first_results, seed: int) -> dict[str, Any]:
+    def _figures(self, rows, fig_results, seed: int, limit_names: set[str]) -> dict[str, Any]:
         figs: dict[str, Any] = {}
         opts = self.figure_opts
         sw = self.sweep
         label = self.label
         # the axis names the quantity, not only its symbol ("fraction l", not "l")
         xname = opts["axis_label"] or (sw["parameter"] if label == sw["parameter"] else f"{sw['parameter']} {label}")
+        measured = [r for r in rows if r["filter"] not in limit_names]
         if len(sw["values"]) > 1:
             # the unit of the headline component, from the scenario (the variants share the state)
-            unit = next(iter(first_results.values()))[1].component_unit(sw["component"]) if first_results else None
+            some = next((res for by in fig_results.values() for res in by.values()), None)
+            unit = some[1].component_unit(sw["component"]) if some else None
             # one RMSE figure per scenario variant: their scales can differ by orders of magnitude
             for variant in [v["label"] for v in self.variants] or [None]:
-                sub = [r for r in rows if variant is None or r.get("variant") == variant]
+                sub = [r for r in measured if variant is None or r.get("variant") == variant]
                 name = f"rmse_vs_{label}" if variant is None else f"rmse_vs_{label}_{_slug(variant)}"
+                limits = [(r["filter"], float(r["rmse"])) for r in rows
+                          if r["filter"] in limit_names and (variant is None or r.get("variant") == variant)]
                 figs[name] = metric_against_value(
                     sub,
                     label,
@@ -365,36 +571,60 @@ class SweepPlan:
                     xlabel=xname,
                     ylabel=labelled(f"{sw['component']} RMSE", unit),
                     title=f"RMSE against {label}" + ("" if variant is None else f", {variant}"),
+                    paper=self._paper_points(variant),
+                    references=limits,
                 )
             figs[f"time_vs_{label}"] = metric_against_value(
-                rows, label, "wall_time_s", xlabel=xname, ylabel="filter wall time, all runs (s)", title=f"Run time against {label}"
+                measured, label, "wall_time_s", xlabel=xname, ylabel="filter wall time, all runs (s)", title=f"Run time against {label}"
             )
-        for value in opts["values"]:
-            if value not in first_results:
-                continue
-            scenario, result = first_results[value]
-            run = opts["run"]  # checked against the runs by check_runs
-            tag = f"{label}{_fmt_value(value)}"
-            anchors = getattr(getattr(scenario, "measurement", None), "anchors", None)
-            figs[f"{tag}_estimates"] = trajectory(result, run, landmarks=anchors, title=f"Truth and estimates, run {run}, {label} = {value:g}")
-            if result.truth.shape[-1] == 1:
-                figs[f"{tag}_abs_error"] = abs_error_over_time(result, run, 0)
-            figs[f"{tag}_rmse"] = rmse_over_time(
-                result, sw["component"], log=opts["log_rmse"], title=f"{sw['component']} RMSE over {result.runs} runs, {label} = {value:g}"
-            )
-            consistency = consistency_over_time(result, title=f"Consistency over {result.runs} runs, {label} = {value:g}")
-            if consistency is not None:
-                figs[f"{tag}_consistency"] = consistency
-            for comp in opts["components"]:
-                figs[f"{tag}_rmse_{comp}"] = rmse_over_time(
-                    result, comp, log=opts["log_rmse"], title=f"{comp} RMSE over {result.runs} runs, {label} = {value:g}"
+        several = len(fig_results) > 1
+        for vlabel, by_value in fig_results.items():
+            suffix = f"_{_slug(vlabel)}" if several else ""
+            of = f", {vlabel}" if vlabel else ""
+            for value in opts["values"]:
+                if value not in by_value:
+                    continue
+                scenario, result = by_value[value]
+                run = opts["run"]  # checked against the runs by check_runs
+                tag = f"{label}{_fmt_value(value)}"
+                anchors = getattr(getattr(scenario, "measurement", None), "anchors", None)
+                figs[f"{tag}_estimates{suffix}"] = trajectory(
+                    result, run, landmarks=anchors, title=f"Truth and estimates, run {run}, {label} = {value:g}{of}"
                 )
-        if opts["snapshot_steps"]:
-            value = opts["snapshot_value"] if opts["snapshot_value"] is not None else sw["values"][-1]
-            match = [v for v in first_results if float(v) == float(value)]
-            if match:
-                figs[f"{label}{_fmt_value(value)}_particles"] = self._clouds(match[0], first_results[match[0]], seed, opts)
+                if result.truth.shape[-1] == 1:
+                    figs[f"{tag}_abs_error{suffix}"] = abs_error_over_time(
+                        result, run, 0, title=f"Absolute error of {result.state_labels[0]}, run {run}{of}"
+                    )
+                figs[f"{tag}_rmse{suffix}"] = rmse_over_time(
+                    result, sw["component"], log=opts["log_rmse"],
+                    title=f"{sw['component']} RMSE over {result.runs} runs, {label} = {value:g}{of}",
+                )
+                consistency = consistency_over_time(result, title=f"Consistency over {result.runs} runs, {label} = {value:g}{of}")
+                if consistency is not None:
+                    figs[f"{tag}_consistency{suffix}"] = consistency
+                for comp in opts["components"]:
+                    figs[f"{tag}_rmse_{comp}{suffix}"] = rmse_over_time(
+                        result, comp, log=opts["log_rmse"], title=f"{comp} RMSE over {result.runs} runs, {label} = {value:g}{of}"
+                    )
+            if opts["snapshot_steps"]:
+                value = opts["snapshot_value"] if opts["snapshot_value"] is not None else sw["values"][-1]
+                match = [v for v in by_value if float(v) == float(value)]
+                if match:
+                    figs[f"{label}{_fmt_value(value)}_particles{suffix}"] = self._clouds(match[0], by_value[match[0]], seed, opts)
         return figs
+
+    def _paper_points(self, variant: str | None) -> list[tuple[str, float, float, str]]:
+        """The paper's headline values to mark in a variant's RMSE figure: ``(filter, at, value, legend)``."""
+        out = []
+        for p in self.paper:
+            if p["metric"] != "rmse" or p["at"] is None:
+                continue
+            own = variant is None or not p["variant"] or p["variant"] == variant
+            if not own and not self.figure_opts["paper_on_every_variant"]:
+                continue
+            legend = f"{p['filter']}, {self.figure_opts['paper_label']}" + ("" if own else f" for {p['variant']}")
+            out.append((p["filter"], float(p["at"]), p["value"], legend))
+        return out
 
     def _clouds(self, value, scen_result, seed: int, opts) -> Any:
         scenario, result = scen_result
@@ -412,7 +642,7 @@ class SweepPlan:
         )
 
 
-_KNOWN_SECTIONS = {"scenario", "filters", "sweep", "variants", "figures", "paper"}
+_KNOWN_SECTIONS = {"scenario", "filters", "sweep", "variants", "figures", "paper", "limit", "claim"}
 
 
 def _is_swept(value: float, values: list) -> bool:
@@ -443,7 +673,7 @@ def _summary_columns(scenario: Any) -> list[str]:
     "experiment",
     "sweep",
     "Compare filters over values of one filter parameter (e.g. particles); sections [scenario], [[filters]], "
-    "[sweep], [[variants]], [figures], [[paper]]",
+    "[sweep], [[variants]], [figures], [[paper]], [limit], [[claim]]",
 )
 def _sweep(sections: dict[str, Any], path: Path, name: str) -> SweepPlan:
     for key in sections:
@@ -497,4 +727,61 @@ def _sweep(sections: dict[str, Any], path: Path, name: str) -> SweepPlan:
         for n in (a, b):
             if n not in names:
                 raise ValueError(f"sweep.pairs[{i}]: no filter named {n!r} (have {', '.join(sorted(names))})")
+    for i, lbl in enumerate(figure_opts["variants"]):
+        if lbl not in labels:
+            raise ValueError(f"figures.variants[{i}]: no variant labelled {lbl!r} (have {', '.join(labels) or 'none'})")
+    if "limit" in sections:
+        plan.limit = _resolve_limit(sections, scenario)
+        plan._limit_filter(scenario, 1)  # builds it (and its label), so a bad table fails here
+    plan.claims = _resolve_claims(sections, plan, names, labels, columns)
     return plan
+
+
+def _resolve_limit(sections: dict[str, Any], scenario: Any) -> dict[str, Any]:
+    limit = resolve_section(sections, "limit", LIMIT_PARAMS)
+    table = limit["filter"]
+    if not isinstance(table, dict) or "type" not in table:
+        raise ValueError('limit.filter: expected a filter table, e.g. { type = "pf", particles = 20000 }')
+    if "backend" in table:
+        raise ValueError("limit.filter.backend: set limit.backend instead (auto: numba when installed)")
+    return limit
+
+
+def _resolve_claims(sections: dict[str, Any], plan: SweepPlan, names: set[str], labels: list[str], columns: list[str]) -> list[dict[str, Any]]:
+    """Check the ``[[claim]]`` tables; a value claim without ``value`` takes the matching ``[[paper]]`` entry's."""
+    entries = sections.get("claim", [])
+    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+        raise ValueError("claim: expected [[claim]] tables")
+    values = plan.sweep["values"]
+    out = []
+    for i, entry in enumerate(entries):
+        where = f"claim[{i}]"
+        c = registry.Component("section", "claim", "", CLAIM_PARAMS, dict).resolve(entry, where)
+        if labels and c["variant"] not in labels:
+            raise ValueError(f"{where}.variant: expected one of the variants ({', '.join(labels)}), got {c['variant']!r}")
+        if c["at"] is not None and not _is_swept(c["at"], values):
+            raise ValueError(f"{where}.at: {c['at']:g} is not a swept value (sweep.values = {values})")
+        if bool(c["order"]) == bool(c["filter"]):
+            raise ValueError(f"{where}: give either order (an ordering) or filter (a value), not both or neither")
+        for n in c["order"] or [c["filter"]]:
+            if n not in names:
+                raise ValueError(f"{where}: no filter named {n!r} (have {', '.join(sorted(names))})")
+        if c["order"]:
+            if len(c["order"]) < 2:
+                raise ValueError(f"{where}.order: name at least two filters")
+            out.append(c)
+            continue
+        metric = c["metric"]
+        if metric not in columns or not (metric == "rmse" or metric.startswith(("rms_", "rmse_position", "rmse_velocity"))):
+            have = ", ".join(m for m in columns if m == "rmse" or m.startswith(("rms_", "rmse_")))
+            raise ValueError(f"{where}.metric: no error column {metric!r} with an interval (have {have})")
+        if c["value"] is None or not c["source"]:
+            match = [p for p in plan.paper if p["filter"] == c["filter"] and p["metric"] == metric and p["variant"] == c["variant"]
+                     and (p["at"] is None) == (c["at"] is None) and (c["at"] is None or float(p["at"]) == float(c["at"]))]
+            if c["value"] is None and not match:
+                raise ValueError(f"{where}.value: required (no [[paper]] entry for {c['filter']} {metric} here)")
+            if match:
+                c["value"] = match[0]["value"] if c["value"] is None else c["value"]
+                c["source"] = c["source"] or match[0]["note"]
+        out.append(c)
+    return out

@@ -98,6 +98,8 @@ def metric_against_value(
     ylabel: str | None = None,
     log: bool = False,
     title: str | None = None,
+    paper: Sequence[tuple[str, float, float, str]] = (),
+    references: Sequence[tuple[str, float]] = (),
 ) -> Figure:
     """A metric against the swept value, one line per filter (and variant).
 
@@ -105,6 +107,12 @@ def metric_against_value(
     particles) are drawn as horizontal lines across the plot, each in its own
     colour and dash pattern and named in the legend with ``(baseline)``.
     ``xlabel`` names the swept quantity (default ``value_key``).
+
+    ``paper`` marks a paper's values beside ours: ``(series, x, value,
+    legend)``, drawn as large filled hexagons (a shape no series uses) in the
+    colour of that series, one legend entry per legend text.  ``references``
+    are ``(label, value)`` horizontal lines in black (e.g. an MMSE limit),
+    named in the legend as given.
     """
     fig = Figure(figsize=(7.6, 4.0), layout="constrained")
     ax = fig.add_subplot()
@@ -131,6 +139,7 @@ def metric_against_value(
         ax.set_yscale("log")
         plain_log_ticks(ax)
     distinguish(ax)
+    colours = {ln.get_label().split(" (")[0]: ln.get_color() for ln in ax.lines if not ln.get_label().startswith("_")}
     span = (min(swept), max(swept)) if swept else (0.0, 1.0)
     first = sum(1 for ln in ax.lines if not ln.get_label().startswith("_"))  # colours after the swept series (not the error caps)
     dashes = ((0, (6, 3)), (0, (2, 2)), (0, (8, 3, 2, 3)), (0, (1, 3)))
@@ -141,6 +150,15 @@ def metric_against_value(
         ax.plot(xs, np.full(xs.shape, float(row[metric])), linestyle=dashes[i % len(dashes)], linewidth=1.2,
                 color=f"C{(first + i) % 10}", marker=MARKERS[-1 - i % len(MARKERS)], markersize=5,
                 markerfacecolor="none", markevery=(i % 2, 2), label=f"{key} (baseline)")
+    for j, (label, value) in enumerate(references):
+        ax.plot(span, [value, value], color="black", linestyle=(0, (1, 1.5)) if j % 2 == 0 else (0, (5, 2, 1, 2)),
+                linewidth=1.6, label=label)
+    marked: dict[str, list[tuple[float, float, str]]] = {}
+    for series, x, value, legend in paper:
+        marked.setdefault(legend, []).append((x, value, colours.get(series, "black")))
+    for legend, pts in marked.items():
+        ax.plot([p[0] for p in pts], [p[1] for p in pts], linestyle="none", marker="H", markersize=9,
+                color=pts[0][2], markeredgecolor="black", markeredgewidth=0.8, zorder=5, label=legend)
     ax.set_xlabel(xlabel or value_key)
     ax.set_ylabel(ylabel or metric)
     ax.set_title(title or f"{metric} against {xlabel or value_key}")
