@@ -131,7 +131,10 @@ def test_reproduce_prints_the_paper_table_and_writes_figures(tmp_path, capsys):
     assert "Paper's values (source: paper) beside ours (source: measured)" in text
     assert "6.0001" in text  # the paper's PF value at N = 30
     figs = {p.name for p in (tmp_path / "p1-ungm" / "figures").iterdir()}
-    assert {"N30_estimates.png", "N100_abs_error.png", "N100_rmse.png", "N100_particles.png", "rmse_vs_N.png"} <= figs
+    for q in ("q-1", "q-10"):  # both readings of Q
+        assert {f"N30_estimates_{q}.png", f"N100_abs_error_{q}.png", f"N100_rmse_{q}.png", f"N100_particles_{q}.png", f"rmse_vs_N_{q}.png"} <= figs
+    assert "MMSE limit (PF, N = 20 000, 6 runs)" in text  # its own row, twice the runs
+    assert "ICS-PF's 3.1075 at N = 100 (Table 1, printed as Q = 1)" in text  # a claim with its verdict
     assert (tmp_path / "p1-ungm" / "paper_vs_measured.csv").exists()
 
 
@@ -174,3 +177,125 @@ def test_sweep_figures_of_a_dimensionless_state_show_no_made_up_unit(tmp_path):
     assert labels["N40_abs_error"] == [("time (s)", "|x error|")]  # UNGM's x is dimensionless
     assert labels["N40_rmse"] == [("time (s)", "state RMSE")]
     assert labels["rmse_vs_N"] == [("particles N", "state RMSE")]
+
+
+# -- variants, the MMSE limit and the claims ------------------------------------------
+
+VARIANTS = (
+    SMALL.replace("[sweep]", '[[variants]]\nlabel = "Q = 1"\nq = 1.0\n\n[[variants]]\nlabel = "Q = 10"\nq = 10.0\n\n[sweep]')
+    .replace('note = "made up"', 'variant = "Q = 1"\nnote = "made up"')
+    .replace("snapshot_steps = [2, 12]", 'snapshot_steps = [2, 12]\nvariants = ["Q = 1", "Q = 10"]\npaper_label = "paper (Table 1)"')
+    + """
+[limit]
+filter = { type = "pf", particles = 300 }
+runs_factor = 2
+backend = "numpy"
+
+[[claim]]
+variant = "Q = 1"
+order = ["ICS-PF", "PF"]
+
+[[claim]]
+variant = "Q = 1"
+filter = "PF"
+at = 40
+
+[[claim]]
+variant = "Q = 10"
+filter = "ICS-PF"
+at = 20
+value = 0.5
+source = "made up, far below any filter"
+"""
+)
+
+
+def test_variants_limit_and_claims(tmp_path):
+    from pursuit.experiments.sweep import order_verdict, value_verdict
+
+    out = load_experiment(_write(tmp_path, VARIANTS)).run(runs=5, seed=2)
+    summary, paper, claims, pairs = out.tables
+    col = {c: i for i, c in enumerate(summary.columns)}
+    limit = [r for r in summary.rows if r[col["filter"]].startswith("MMSE limit")]
+    # its own row per variant, labelled with what it is; twice the runs; same truths as the filters' runs
+    assert [(r[col["variant"]], r[col["filter"]], r[col["N"]], r[col["runs"]]) for r in limit] == [
+        ("Q = 1", "MMSE limit (PF, N = 300, 10 runs)", None, 10),
+        ("Q = 10", "MMSE limit (PF, N = 300, 10 runs)", None, 10),
+    ]
+    assert {r[col["variant"]] for r in summary.rows} == {"Q = 1", "Q = 10"}
+    # the limit is in the paper table too, one row per variant
+    assert [(r[0], r[2]) for r in paper.rows if str(r[2]).startswith("MMSE")] == [(v, limit[0][col["filter"]]) for v in ("Q = 1", "Q = 10")]
+    # the verdicts follow the measured numbers
+    assert claims.kind == "paper" and claims.columns == ["variant", "claim", "verdict", "because"]
+    assert claims.rows[0][1] == "ICS-PF < PF in state RMSE at every N"
+    diffs = [(f"N = {r[1]}", r[2], r[3], r[6], r[7]) for r in pairs.rows if r[0] == "Q = 1" and (r[2], r[3]) == ("ICS-PF", "PF")]
+    assert len(diffs) == 2 and (claims.rows[0][2], claims.rows[0][3]) == order_verdict(diffs)
+    pf_rows = {r[col["N"]]: r for r in summary.rows if r[col["variant"]] == "Q = 1" and r[col["filter"]] == "PF"}
+    assert claims.rows[1][1] == "PF's 4.7 at N = 40 (made up)"
+    assert claims.rows[1][2] == value_verdict(4.7, pf_rows[40][col["rmse"]], pf_rows[40][col["ci95"]])[0]
+    assert claims.rows[2][2] == "not reachable" and "below the MMSE limit" in claims.rows[2][3]
+    # one-run figures for both variants, named by variant; one RMSE figure per variant with the paper marked on Q = 1's
+    assert {"N40_estimates_q-1", "N40_estimates_q-10", "N40_particles_q-10", "rmse_vs_N_q-1", "rmse_vs_N_q-10"} <= set(out.figures)
+    legend = [t.get_text() for t in out.figures["rmse_vs_N_q-1"].axes[0].get_legend().get_texts()]
+    assert "PF, paper (Table 1)" in legend and limit[0][col["filter"]] in legend
+    legend10 = [t.get_text() for t in out.figures["rmse_vs_N_q-10"].axes[0].get_legend().get_texts()]
+    assert not any("paper" in t for t in legend10)  # the paper's values belong to Q = 1 (no paper_on_every_variant)
+    assert len(pairs.rows) == 8
+
+
+def test_the_limit_shares_the_filters_truths(tmp_path):
+    # the limit's first runs are the filters' runs (same root seed): its per-run errors pair with theirs
+    out = load_experiment(_write(tmp_path, VARIANTS)).run(runs=4, seed=9)
+    lim, pf = out.results["Q = 10|limit"], out.results["Q = 10|N=20"]
+    np.testing.assert_array_equal(lim.truth[:, :4], pf.truth)
+
+
+def test_order_verdict_follows_the_intervals():
+    from pursuit.experiments.sweep import order_verdict
+
+    holds = [("N = 30", "ICS-PF", "CS-PF", -0.5, 0.2), ("N = 30", "CS-PF", "PF", -0.3, 0.25)]
+    assert order_verdict(holds) == ("reproduced", "weakest: CS-PF \u2212 PF = \u22120.3 [\u22120.55, \u22120.05] at N = 30")
+    fails = holds + [("N = 100", "CS-PF", "PF", 0.4, 0.2), ("N = 60", "CS-PF", "PF", 0.3, 0.1)]
+    assert order_verdict(fails) == ("not reproduced", "CS-PF \u2212 PF = +0.4 [0.2, 0.6] at N = 100")
+    unclear = holds + [("N = 60", "ICS-PF", "CS-PF", -0.1, 0.3)]
+    verdict, because = order_verdict(unclear)
+    assert verdict == "not shown" and because.startswith("ICS-PF \u2212 CS-PF = \u22120.1 [\u22120.4, 0.2] at N = 60")
+    with pytest.raises(ValueError, match="diffs"):
+        order_verdict([])
+
+
+def test_value_verdict_follows_the_numbers():
+    from pursuit.experiments.sweep import value_verdict
+
+    assert value_verdict(4.7, 4.75, 0.2) == ("reproduced", "measured 4.75 \u00b1 0.2")
+    assert value_verdict(4.0, 4.75, 0.2)[0] == "not reproduced"  # 0.75 > sqrt(2)*0.2
+    assert value_verdict(4.0, 4.75, 0.2)[1].endswith("(the paper's is lower)")
+    assert value_verdict(4.5, 4.75, 0.2)[0] == "reproduced"  # 0.25 <= 0.283
+    assert value_verdict(3.11, 6.3, 0.2, limit=4.4, limit_half=0.3) == ("not reachable", "below the MMSE limit 4.4 [4.1, 4.7]")
+    assert value_verdict(4.2, 4.3, 0.2, limit=4.4, limit_half=0.3)[0] == "reproduced"  # within the limit's interval: reachable
+
+
+@pytest.mark.parametrize(
+    "edit, field",
+    [
+        (('order = ["ICS-PF", "PF"]', 'order = ["ICS-PF", "XX"]'), "claim[0]: no filter named 'XX'"),
+        (('order = ["ICS-PF", "PF"]', 'order = ["ICS-PF"]'), "claim[0].order: name at least two filters"),
+        (('order = ["ICS-PF", "PF"]', 'order = ["ICS-PF", "PF"]\nfilter = "PF"'), "claim[0]: give either order"),
+        (('variant = "Q = 1"\norder', 'variant = "Q = 3"\norder'), "claim[0].variant: expected one of the variants"),
+        (("at = 40\n\n[[claim]]", "at = 30\n\n[[claim]]"), "claim[1].at: 30 is not a swept value"),
+        (("filter = \"PF\"\nat = 40", "filter = \"PF\"\nat = 20"), "claim[1].value: required (no [[paper]] entry"),
+        (('at = 40\n\n[[claim]]', 'at = 40\nmetric = "nis_mean"\n\n[[claim]]'), "claim[1].metric: no error column 'nis_mean'"),
+        (("runs_factor = 2", "runs_factor = 0"), "limit.runs_factor: must be at least 1"),
+        (('backend = "numpy"', 'backend = "gpu"'), "limit.backend"),
+        (('filter = { type = "pf", particles = 300 }', 'filter = { type = "pf", particles = 300, backend = "numpy" }'), "limit.filter.backend"),
+        (('filter = { type = "pf", particles = 300 }', 'filter = { type = "pf", particles = -3 }'), "limit.filter"),
+        (('filter = { type = "pf", particles = 300 }', 'filter = "pf"'), "limit.filter: expected a filter table"),
+        (('variants = ["Q = 1", "Q = 10"]', 'variants = ["Q = 2"]'), "figures.variants[0]: no variant labelled 'Q = 2'"),
+    ],
+)
+def test_bad_limit_and_claims_name_the_field(tmp_path, edit, field):
+    old, new = edit
+    assert old in VARIANTS
+    with pytest.raises(ConfigError) as err:
+        load_experiment(_write(tmp_path, VARIANTS.replace(old, new, 1)))
+    assert field in str(err.value)

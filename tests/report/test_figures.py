@@ -166,3 +166,24 @@ def test_log_tick_at_infinity_gets_no_label():
     fmt = _PlainLogFormatter()
     fmt.set_axis(Figure().add_subplot().yaxis)
     assert fmt(np.inf) == "" and fmt(0.0) == ""
+
+
+def test_sweep_figure_marks_the_papers_values_and_the_limit():
+    rows = [
+        {"N": n, "filter": f, "rmse": r, "ci95": 0.1}
+        for n, f, r in [(30, "PF", 5.8), (100, "PF", 4.75), (30, "ICS-PF", 6.0), (100, "ICS-PF", 5.9)]
+    ]
+    paper = [("PF", 30.0, 6.0, "PF, paper (Table 1)"), ("PF", 100.0, 4.7, "PF, paper (Table 1)"), ("ICS-PF", 100.0, 3.11, "ICS-PF, paper (Table 1)")]
+    fig = metric_against_value(rows, "N", "rmse", error_key="ci95", paper=paper, references=[("MMSE limit (PF)", 4.4)])
+    ax = fig.axes[0]
+    by = {ln.get_label(): ln for ln in ax.lines}
+    pf_paper = by["PF, paper (Table 1)"]
+    assert pf_paper.get_marker() == "H" and pf_paper.get_linestyle() == "None"  # markers only, a shape no series uses
+    assert list(pf_paper.get_ydata()) == [6.0, 4.7]
+    assert np.allclose(pf_paper.get_xdata(), [30, 100], atol=2.0)  # beside our points, not on them
+    assert pf_paper.get_color() == by["PF"].get_color()  # in the filter's colour
+    assert list(by["ICS-PF, paper (Table 1)"].get_ydata()) == [3.11]
+    assert list(by["MMSE limit (PF)"].get_ydata()) == [4.4, 4.4]
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert {"PF, paper (Table 1)", "ICS-PF, paper (Table 1)", "MMSE limit (PF)"} <= set(legend)
+    assert "H" not in (by["PF"].get_marker(), by["ICS-PF"].get_marker())

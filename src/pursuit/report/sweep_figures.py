@@ -110,7 +110,8 @@ def metric_against_value(
 
     ``paper`` marks a paper's values beside ours: ``(series, x, value,
     legend)``, drawn as large filled hexagons (a shape no series uses) in the
-    colour of that series, one legend entry per legend text.  ``references``
+    colour of that series, a little right of ``x`` so that neither hides our
+    point, one legend entry per legend text.  ``references``
     are ``(label, value)`` horizontal lines in black (e.g. an MMSE limit),
     named in the legend as given.
     """
@@ -156,8 +157,9 @@ def metric_against_value(
     marked: dict[str, list[tuple[float, float, str]]] = {}
     for series, x, value, legend in paper:
         marked.setdefault(legend, []).append((x, value, colours.get(series, "black")))
+    shift = 0.012 * (span[1] - span[0])  # just right of our point at the same value, so neither hides the other
     for legend, pts in marked.items():
-        ax.plot([p[0] for p in pts], [p[1] for p in pts], linestyle="none", marker="H", markersize=9,
+        ax.plot([p[0] + shift for p in pts], [p[1] for p in pts], linestyle="none", marker="H", markersize=9,
                 color=pts[0][2], markeredgecolor="black", markeredgewidth=0.8, zorder=5, label=legend)
     ax.set_xlabel(xlabel or value_key)
     ax.set_ylabel(ylabel or metric)
