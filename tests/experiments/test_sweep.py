@@ -299,3 +299,11 @@ def test_bad_limit_and_claims_name_the_field(tmp_path, edit, field):
     with pytest.raises(ConfigError) as err:
         load_experiment(_write(tmp_path, VARIANTS.replace(old, new, 1)))
     assert field in str(err.value)
+
+
+def test_a_value_is_not_judged_from_an_interval_that_reaches_zero():
+    from pursuit.experiments.sweep import value_verdict
+
+    # a diverging filter: its mean error is huge and so is its interval; it says nothing about 0.03
+    assert value_verdict(0.0306, 2.2e19, 2.1e19)[0] == "not shown"
+    assert value_verdict(0.0306, 0.5, float("nan"))[0] == "not shown"

@@ -237,6 +237,8 @@ def value_verdict(
 
     ``"not reachable"`` when ``value`` lies below the limit's interval
     ``limit − limit_half`` (no filter has a lower mean error); else
+    ``"not shown"`` when our interval ``measured ± √2·half`` reaches 0 (too
+    wide to tell any error from none, e.g. a diverging filter); else
     ``"reproduced"`` when ``|measured − value| ≤ √2·half`` (the 95 % interval
     of the difference of two Monte Carlo means, the paper's as noisy as
     ours); else ``"not reproduced"``.  ``because`` gives the numbers.
@@ -244,7 +246,9 @@ def value_verdict(
     if limit is not None and value < limit - (limit_half or 0.0):
         return "not reachable", f"below the MMSE limit {_num(limit)} [{_num(limit - (limit_half or 0.0))}, {_num(limit + (limit_half or 0.0))}]"
     ours = f"measured {_num(measured)} \u00b1 {_num(half)}"
-    if math.isfinite(half) and abs(measured - value) <= math.sqrt(2.0) * half:
+    if not math.isfinite(half) or measured - math.sqrt(2.0) * half <= 0:
+        return "not shown", ours + " (the interval is too wide to judge)"
+    if abs(measured - value) <= math.sqrt(2.0) * half:
         return "reproduced", ours
     return "not reproduced", ours + (" (the paper's is lower)" if value < measured else " (the paper's is higher)")
 
@@ -484,7 +488,7 @@ class SweepPlan:
                     for a, b in zip(c["order"], c["order"][1:]):
                         mean, half, _ = paired_difference(per_run[(v, at, a)], per_run[(v, at, b)])
                         diffs.append((f"{self.label} = {_fmt_value(at)}", a, b, mean, half))
-                where = f"at every {self.label}" if c["at"] is None else f"at {self.label} = {_fmt_value(c['at'])}"
+                where = f"at every {self.label}" if len(values) > 1 else f"at {self.label} = {_fmt_value(values[0])}"
                 text = f"{' < '.join(c['order'])} in {sw['component']} RMSE {where}"
                 verdict, because = order_verdict(diffs)
             else:
@@ -509,7 +513,7 @@ class SweepPlan:
             "An ordering A < B < ... is reproduced when every paired 95 % interval of A − B (per-run RMSEs, same runs) lies "
             "below 0, not reproduced when one lies above 0, else not shown. A value is reproduced when it lies within "
             "\u221a2 \u00d7 our 95 % half-width of our mean (both means carry Monte Carlo noise), not reachable when it lies "
-            "below the MMSE limit's interval.",
+            "below the MMSE limit's interval, not shown when our interval reaches 0.",
             kind="paper",
         )
 
