@@ -23,7 +23,7 @@ What is measured (wall clock, median of ``--repeat`` runs, one process):
 * bootstrap PF on a 2-D constant-velocity target ranged by three anchors
   (M = 100, T = 100, N = 1000 and 10 000), NumPy and numba against
   ``particles`` with the same F, Q, anchors, noise, priors and measurements;
-* the whole ``p1-wsn`` experiment (7 filters, 100 runs, N = 200, 100 steps)
+* the whole ``p1-wsn`` experiment (7 filters, both layouts, 100 runs, N = 200, 100 steps)
   end to end, NumPy and with ``--compute-backend numba``;
 * pursuit's numba rows use ``numba.set_num_threads(1)`` or ``(2)``.
 
@@ -215,7 +215,8 @@ def bench_p1_wsn(runs: int, backend: str = "numpy") -> tuple[float, dict[str, fl
         set_default_backend(None)
     summary = out.tables[0]
     i_f, i_t = summary.columns.index("filter"), summary.columns.index("wall_time_s")
-    return total, {row[i_f]: float(row[i_t]) for row in summary.rows}
+    i_v = summary.columns.index("variant") if "variant" in summary.columns else None  # the layouts (one node, grid)
+    return total, {(row[i_f] if i_v is None else f"{row[i_f]} [{row[i_v]}]"): float(row[i_t]) for row in summary.rows}
 
 
 def machine() -> str:
@@ -301,7 +302,7 @@ def main(quick: bool = False, repeat: int = 3) -> dict[str, Any]:
         total, per_filter = bench_p1_wsn(wsn_runs, backend)
         numbers[f"p1_wsn_{backend}"] = {"total": total, **per_filter}
         parts = ", ".join(f"{name} {secs:.1f} s" for name, secs in per_filter.items())
-        rows.append((f"p1-wsn end to end ({wsn_runs} runs, 7 filters, N = 200), {backend}", f"{total:.1f} s wall", "", parts))
+        rows.append((f"p1-wsn end to end ({wsn_runs} runs, 7 filters, N = 200, both layouts), {backend}", f"{total:.1f} s wall", "", parts))
 
     print(f"Machine: {numbers['machine']}\n")
     print("| work: implementation | M particle-steps/s | vs particles | note |")
