@@ -614,7 +614,7 @@ class SweepPlan:
                 value = opts["snapshot_value"] if opts["snapshot_value"] is not None else sw["values"][-1]
                 match = [v for v in by_value if float(v) == float(value)]
                 if match:
-                    figs[f"{label}{_fmt_value(value)}_particles{suffix}"] = self._clouds(match[0], by_value[match[0]], seed, opts)
+                    figs[f"{label}{_fmt_value(value)}_particles{suffix}"] = self._clouds(match[0], by_value[match[0]], seed, opts, of)
         return figs
 
     def _paper_points(self, variant: str | None) -> list[tuple[str, float, float, str]]:
@@ -630,7 +630,7 @@ class SweepPlan:
             out.append((p["filter"], float(p["at"]), p["value"], legend))
         return out
 
-    def _clouds(self, value, scen_result, seed: int, opts) -> Any:
+    def _clouds(self, value, scen_result, seed: int, opts, of: str = "") -> Any:
         scenario, result = scen_result
         run = opts["run"]
         sim = scenario.simulate(run_streams(seed, [run], SCENARIO_STREAM), 1)
@@ -642,7 +642,7 @@ class SweepPlan:
                 filt, sim.measurements, sim.prior, run_streams(seed, [run], FILTER_STREAM), opts["snapshot_steps"]
             )
         return particle_clouds(
-            snaps, sim.truth[:, 0, :], 0, label=labelled(scenario.state_labels[0], result.unit(0)), title=f"Particles of run {run} after the step"
+            snaps, sim.truth[:, 0, :], 0, label=labelled(scenario.state_labels[0], result.unit(0)), title=f"Particles of run {run} after the step{of}"
         )
 
 
