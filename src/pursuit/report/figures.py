@@ -14,6 +14,9 @@ from ..results import MonteCarloResult
 __all__ = [
     "rmse_over_time",
     "trajectory",
+    "view_limits",
+    "leaving_point",
+    "mark_leaving",
     "fading_over_time",
     "consistency_over_time",
     "mark_events",
@@ -208,6 +211,13 @@ def trajectory(
     With two or more position components the plot is the path in the plane
     (first two position axes); with one it is position against time; with
     none, the first state component against time.
+
+    The axes are those of the truth and the sensors (``landmarks``) with a
+    margin (:data:`VIEW_MARGIN`), never of the estimates: an estimate that
+    leaves them is cut at the edge and marked where it first leaves (legend
+    entry "estimate leaves the axes"), and a filter whose run was flagged
+    diverged (:mod:`pursuit.divergence`) says so, with the step, in its
+    legend label.
     """
     stored = result.stored()
     if not 0 <= run < stored.runs:
@@ -218,30 +228,117 @@ def trajectory(
     names = list(filters) if filters is not None else result.filter_names
     pos = list(result.position_indices) or [0]
     truth = result.truth[:, run, :]
+    exits = []
     if len(pos) >= 2:
         i, j = pos[0], pos[1]
         ax.plot(truth[:, i], truth[:, j], color="black", linewidth=2.0, label="truth")
+        lm = np.asarray(landmarks, dtype=float).reshape(-1, 2) if landmarks is not None and len(landmarks) else None
+        view = view_limits(truth[:, [i, j]], lm)
         for name in names:
-            est = result.filters[name].estimates[:, run, :]
-            ax.plot(est[:, i], est[:, j], linewidth=1.2, label=name)
-        if landmarks is not None and len(landmarks):
-            lm = np.asarray(landmarks)
+            est = result.filters[name].estimates[:, run, :][:, [i, j]]
+            ax.plot(est[:, 0], est[:, 1], linewidth=1.2, label=_flagged_label(result, name, run))
+            exits.append(leaving_point(est, view))
+        if lm is not None:
             ax.scatter(lm[:, 0], lm[:, 1], marker="^", color="tab:red", zorder=5, label="sensors")
         ax.set_xlabel(labelled(result.state_labels[i], result.unit(i)))
         ax.set_ylabel(labelled(result.state_labels[j], result.unit(j)))
-        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_aspect("equal", adjustable="box")  # "datalim" would move the limits set below
     else:
         i = pos[0]
-        ax.plot(result.times, truth[:, i], color="black", linewidth=2.0, label="truth")
+        t = np.asarray(result.times, dtype=float)
+        ax.plot(t, truth[:, i], color="black", linewidth=2.0, label="truth")
+        span = np.array([[t[0], np.nanmin(truth[:, i])], [t[-1], np.nanmax(truth[:, i])]])
+        view = view_limits(span, None, axes=(1,))
         for name in names:
-            ax.plot(result.times, result.filters[name].estimates[:, run, i], linewidth=1.2, label=name)
+            est = result.filters[name].estimates[:, run, i]
+            ax.plot(t, est, linewidth=1.2, label=_flagged_label(result, name, run))
+            exits.append(leaving_point(np.column_stack([t, est]), view))
         ax.set_xlabel("time (s)")
         ax.set_ylabel(labelled(result.state_labels[i], result.unit(i)))
+    mark_leaving(ax, [e for e in exits if e is not None])
+    ax.set_xlim(*view[:, 0])
+    ax.set_ylim(*view[:, 1])
+    ax.set_autoscale_on(False)
     ax.set_title(title or f"Truth and estimates, run {run}")
     ax.grid(True, alpha=0.3)
     distinguish(ax)
     legend_beside(ax)
     return fig
+
+
+VIEW_MARGIN = 0.25
+"""Share of the truth's (and sensors') extent added on every side of a state-space plot."""
+
+
+def view_limits(points: np.ndarray, sensors: np.ndarray | None = None, *, axes: Sequence[int] = (0, 1)) -> np.ndarray:
+    """``(2, 2)`` limits ``[[x0, y0], [x1, y1]]`` of the finite ``points`` (and ``sensors``) with a margin.
+
+    The margin is :data:`VIEW_MARGIN` of the largest extent among ``axes``
+    (the axes in the same unit) on each of them; the other axes get that
+    share of their own extent.  A point-like extent gets a margin of 1 unit.
+    """
+    p = np.asarray(points, dtype=float).reshape(-1, 2)
+    if sensors is not None and len(sensors):
+        p = np.vstack([p, np.asarray(sensors, dtype=float).reshape(-1, 2)])
+    p = p[np.isfinite(p).all(axis=1)]
+    if not len(p):
+        return np.array([[0.0, 0.0], [1.0, 1.0]])
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    extent = hi - lo
+    common = max(float(np.max(extent[list(axes)])), 0.0)
+    margin = VIEW_MARGIN * extent
+    for a in axes:
+        margin[a] = VIEW_MARGIN * common
+    margin = np.where(margin > 0, margin, np.maximum(1.0, 1e-9 * np.abs(lo)))
+    return np.array([lo - margin, hi + margin])
+
+
+def leaving_point(path: np.ndarray, view: np.ndarray) -> np.ndarray | None:
+    """Where a ``(K, 2)`` path first leaves the box ``view`` (on its edge), or None if it stays inside.
+
+    A non-finite point counts as outside; a path that starts outside is
+    marked at its first point, clipped to the box.
+    """
+    path = np.asarray(path, dtype=float)
+    lo, hi = view
+    with np.errstate(invalid="ignore"):
+        inside = np.isfinite(path).all(axis=1) & np.all((path >= lo) & (path <= hi), axis=1)
+    if inside.all():
+        return None
+    k = int(np.argmin(inside))
+    p1 = path[k]
+    if k == 0 or not np.isfinite(p1).all():
+        p = path[k - 1] if k > 0 else np.clip(np.nan_to_num(p1, nan=0.0), lo, hi)
+        return np.clip(p, lo, hi)
+    p0 = path[k - 1]
+    d = p1 - p0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(d > 0, (hi - p0) / d, np.where(d < 0, (lo - p0) / d, np.inf))
+    return np.clip(p0 + float(np.min(t)) * d, lo, hi)
+
+
+LEAVES_LABEL = "estimate leaves the axes"
+"""The legend entry of the marks where estimates leave a state-space plot."""
+
+
+def mark_leaving(ax, points: Sequence[np.ndarray]) -> None:
+    """Mark where estimates leave the axes: red crosses on the edge, one legend entry."""
+    if not points:
+        return
+    xy = np.asarray(points, dtype=float)
+    ax.scatter(xy[:, 0], xy[:, 1], marker="X", s=70, color="tab:red", edgecolor="white", linewidth=0.6,
+               zorder=6, clip_on=False, label=LEAVES_LABEL)
+
+
+def _flagged_label(result: MonteCarloResult, name: str, run: int) -> str:
+    """The filter's name, with the step at which this run was flagged diverged, if it was."""
+    flags = result.filters[name].info.get("diverged")
+    if flags is None:
+        return name
+    col = np.asarray(flags)[:, run]
+    if not col.any():
+        return name
+    return f"{name} (diverged at step {int(np.argmax(col)) + 1})"
 
 
 def fading_over_time(
