@@ -166,3 +166,56 @@ def test_log_tick_at_infinity_gets_no_label():
     fmt = _PlainLogFormatter()
     fmt.set_axis(Figure().add_subplot().yaxis)
     assert fmt(np.inf) == "" and fmt(0.0) == ""
+
+
+def test_trajectory_keeps_the_truths_axes_and_marks_a_runaway_estimate():
+    from pursuit.report.figures import LEAVES_LABEL, VIEW_MARGIN, trajectory, view_limits
+
+    from ..engine.test_divergence_flags import SCENARIO, Runaway, _kfs
+
+    good, _ = _kfs()
+    result = monte_carlo(SCENARIO, [good, Runaway()], 3, 2)
+    assert np.abs(result.filters["runaway"].estimates[:, 0, 0]).max() > 1e6
+    anchors = np.array([[-5.0, -5.0]])
+    fig = trajectory(result, 0, landmarks=anchors)
+    assert figure_problems(fig) == []
+    ax = fig.get_axes()[0]
+    truth = result.truth[:, 0][:, [0, 2]]
+    lo, hi = np.vstack([truth, anchors]).min(axis=0), np.vstack([truth, anchors]).max(axis=0)
+    margin = VIEW_MARGIN * float(np.max(hi - lo))
+    assert ax.get_xlim() == pytest.approx((lo[0] - margin, hi[0] + margin))
+    assert ax.get_ylim() == pytest.approx((lo[1] - margin, hi[1] + margin))
+    np.testing.assert_allclose(view_limits(truth, anchors), [lo - margin, hi + margin])
+    marks = [c for c in ax.collections if c.get_label() == LEAVES_LABEL]
+    assert len(marks) == 1
+    (x, y), = marks[0].get_offsets()
+    assert x == pytest.approx(hi[0] + margin)  # on the right edge, where the estimate runs out
+    assert lo[1] - margin <= y <= hi[1] + margin
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert LEAVES_LABEL in labels
+    step = int(result.diverged_step("runaway")[0])
+    assert f"runaway (diverged at step {step})" in labels and good.name in labels
+
+
+def test_trajectory_against_time_keeps_the_truths_axes():
+    from pursuit.report.figures import LEAVES_LABEL, trajectory
+
+    from ..engine.test_divergence_flags import Runaway
+
+    result = monte_carlo(SMALL, [Runaway(start=5)], 2, 1)
+    result = dataclasses.replace(result, position_indices=(0,))  # one position component: drawn against time
+    fig = trajectory(result, 1)
+    ax = fig.get_axes()[0]
+    x = result.truth[:, 1, 0]
+    assert ax.get_ylim()[1] < x.max() + 0.3 * (x.max() - x.min())
+    assert [c for c in ax.collections if c.get_label() == LEAVES_LABEL]
+
+
+def test_leaving_point_is_on_the_edge_where_the_path_crosses_it():
+    from pursuit.report.figures import leaving_point
+
+    view = np.array([[0.0, 0.0], [10.0, 10.0]])
+    assert leaving_point(np.array([[1.0, 1.0], [9.0, 9.0]]), view) is None
+    np.testing.assert_allclose(leaving_point(np.array([[5.0, 5.0], [25.0, 15.0]]), view), [10.0, 7.5])
+    np.testing.assert_allclose(leaving_point(np.array([[5.0, 5.0], [np.nan, np.nan]]), view), [5.0, 5.0])
+    np.testing.assert_allclose(leaving_point(np.array([[-5.0, 50.0], [1.0, 1.0]]), view), [0.0, 10.0])

@@ -171,7 +171,7 @@ class ConditionsPlan:
             f"Cumulative position RMSE (m, {self.average} average over {runs} runs) per filter and condition",
             cols,
             rows,
-            notes="*_diverged: runs flagged diverged in that condition (docs/report.md); their errors are in the RMSE.",
+            notes="*_diverged: runs flagged diverged in that condition (docs/concepts.md, diverged runs); their errors are in the RMSE.",
         )
 
     def _improvement_table(self, results: dict[str, MonteCarloResult]) -> Table:

@@ -129,7 +129,7 @@ def rmse_table(result: MonteCarloResult, axes: str) -> Table:
         f"{result.scenario}: RMSE averaged over time (mean over steps of the RMSE over {result.runs} runs), seed {result.seed}",
         ["filter", "axis", "position_m", "velocity_m_s", "acceleration_m_s2", "diverged"],
         rows,
-        notes="diverged: the filter's runs flagged diverged (docs/report.md), whose errors are in the RMSE.",
+        notes="diverged: the filter's runs flagged diverged (docs/concepts.md, diverged runs), whose errors are in the RMSE.",
     )
 
 

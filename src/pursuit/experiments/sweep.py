@@ -291,7 +291,7 @@ class SweepPlan:
         notes = (
             f"rmse: {what} of the {sw['component']} component, ci95 its 95 % confidence half-width; "
             f"rms_*: pooled per state component; an empty {self.label} marks a filter without that parameter "
-            "(run once). diverged: runs flagged diverged (docs/report.md), counted in the RMSEs; diverged_from_step: "
+            "(run once). diverged: runs flagged diverged (docs/concepts.md, diverged runs), counted in the RMSEs; diverged_from_step: "
             "the earliest step flagged. wall_time_s: filtering time of the whole Monte Carlo run on this machine."
         )
         return Table("summary", f"{self.name}: swept {self.label}", cols, [[r.get(c) for c in cols] for r in rows], notes)

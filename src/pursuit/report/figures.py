@@ -249,6 +249,8 @@ def trajectory(
         ax.plot(t, truth[:, i], color="black", linewidth=2.0, label="truth")
         span = np.array([[t[0], np.nanmin(truth[:, i])], [t[-1], np.nanmax(truth[:, i])]])
         view = view_limits(span, None, axes=(1,))
+        if t[-1] > t[0]:
+            view[:, 0] = t[0], t[-1]  # time: the whole run, no margin
         for name in names:
             est = result.filters[name].estimates[:, run, i]
             ax.plot(t, est, linewidth=1.2, label=_flagged_label(result, name, run))
