@@ -219,3 +219,18 @@ def test_leaving_point_is_on_the_edge_where_the_path_crosses_it():
     np.testing.assert_allclose(leaving_point(np.array([[5.0, 5.0], [25.0, 15.0]]), view), [10.0, 7.5])
     np.testing.assert_allclose(leaving_point(np.array([[5.0, 5.0], [np.nan, np.nan]]), view), [5.0, 5.0])
     np.testing.assert_allclose(leaving_point(np.array([[-5.0, 50.0], [1.0, 1.0]]), view), [0.0, 10.0])
+
+
+def test_rmse_figure_names_diverged_runs_and_stays_readable():
+    from ..engine.test_divergence_flags import SCENARIO, Runaway, _kfs
+
+    good, _ = _kfs()
+    result = monte_carlo(SCENARIO, [good, Runaway()], 3, 2)
+    fig = rmse_over_time(result, "position", log=False)
+    assert figure_problems(fig) == []
+    ax = fig.get_axes()[0]
+    assert ax.get_yscale() == "log"  # the runaway's 1e14 m would flatten the KF's curve on a linear axis
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert labels == [good.name, "runaway (diverged in 3 of 3 runs)"]
+    alone = rmse_over_time(result, "position", log=False, filters=[good.name])
+    assert alone.get_axes()[0].get_yscale() == "linear"

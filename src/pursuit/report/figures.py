@@ -16,6 +16,7 @@ __all__ = [
     "trajectory",
     "view_limits",
     "leaving_point",
+    "first_outside",
     "mark_leaving",
     "fading_over_time",
     "consistency_over_time",
@@ -170,12 +171,23 @@ def rmse_over_time(
     events
         ``(time, label)`` pairs drawn as labelled vertical lines (e.g. an
         outlier).
+
+    A filter with runs flagged diverged (:mod:`pursuit.divergence`) says how
+    many in its legend label; if its RMSE reaches :data:`DWARF_RATIO` times
+    that of every filter without, the y axis is logarithmic even when
+    ``log`` is False, so the other curves stay readable.
     """
     fig, ax = _new()
     names = list(filters) if filters is not None else result.filter_names
     label = component if isinstance(component, str) else "state " + ",".join(map(str, component))
+    curves = {name: result.rmse_per_step(name, component) for name in names}
+    counts = {name: (result.divergence(name) or {}).get("diverged", 0) for name in names}
     for name in names:
-        ax.plot(result.times, result.rmse_per_step(name, component), label=name, linewidth=1.4)
+        n = counts[name]
+        text = f"{name} (diverged in {n} of {result.runs} runs)" if n else name
+        ax.plot(result.times, curves[name], label=text, linewidth=1.4)
+    if not log and _dwarfs_the_rest(curves, counts):
+        log = True  # a diverged filter's curve would flatten every other one on a linear axis
     if log:
         ax.set_yscale("log")
         plain_log_ticks(ax)
@@ -188,6 +200,24 @@ def rmse_over_time(
     ax.grid(True, alpha=0.3)
     legend_beside(ax)
     return fig
+
+
+DWARF_RATIO = 100.0
+"""A diverged filter's largest RMSE this many times the others' switches an RMSE figure to a log axis."""
+
+
+def _dwarfs_the_rest(curves: dict[str, np.ndarray], diverged: dict[str, int]) -> bool:
+    """Whether a filter with diverged runs reaches :data:`DWARF_RATIO` times the largest RMSE of the filters without."""
+    def top(names):
+        vals = [np.nanmax(np.where(np.isfinite(curves[n]), curves[n], np.nan), initial=0.0) for n in names]
+        return max(vals, default=0.0)
+
+    bad = [n for n in curves if diverged[n]]
+    good = [n for n in curves if not diverged[n]]
+    if not bad or not good:
+        return False
+    rest = top(good)
+    return rest > 0 and (top(bad) > DWARF_RATIO * rest or any(not np.isfinite(curves[n]).all() for n in bad))
 
 
 def mark_events(ax, events: Sequence[tuple[float, str]]) -> None:
@@ -217,7 +247,8 @@ def trajectory(
     leaves them is cut at the edge and marked where it first leaves (legend
     entry "estimate leaves the axes"), and a filter whose run was flagged
     diverged (:mod:`pursuit.divergence`) says so, with the step, in its
-    legend label.
+    legend label; a diverged run's estimate is drawn only up to where it
+    first leaves.
     """
     stored = result.stored()
     if not 0 <= run < stored.runs:
@@ -236,8 +267,12 @@ def trajectory(
         view = view_limits(truth[:, [i, j]], lm)
         for name in names:
             est = result.filters[name].estimates[:, run, :][:, [i, j]]
+            out = leaving_point(est, view)
+            if out is not None and _flagged_label(result, name, run) != name:
+                # a diverged run is drawn up to where it leaves: its later wanderings would cross the whole plot
+                est = np.vstack([est[: first_outside(est, view)], out])
             ax.plot(est[:, 0], est[:, 1], linewidth=1.2, label=_flagged_label(result, name, run))
-            exits.append(leaving_point(est, view))
+            exits.append(out)
         if lm is not None:
             ax.scatter(lm[:, 0], lm[:, 1], marker="^", color="tab:red", zorder=5, label="sensors")
         ax.set_xlabel(labelled(result.state_labels[i], result.unit(i)))
@@ -295,6 +330,15 @@ def view_limits(points: np.ndarray, sensors: np.ndarray | None = None, *, axes: 
     return np.array([lo - margin, hi + margin])
 
 
+def first_outside(path: np.ndarray, view: np.ndarray) -> int | None:
+    """Index of the first point of a ``(K, 2)`` path outside the box ``view`` (non-finite counts), or None."""
+    path = np.asarray(path, dtype=float)
+    lo, hi = view
+    with np.errstate(invalid="ignore"):
+        inside = np.isfinite(path).all(axis=1) & np.all((path >= lo) & (path <= hi), axis=1)
+    return None if inside.all() else int(np.argmin(inside))
+
+
 def leaving_point(path: np.ndarray, view: np.ndarray) -> np.ndarray | None:
     """Where a ``(K, 2)`` path first leaves the box ``view`` (on its edge), or None if it stays inside.
 
@@ -303,11 +347,9 @@ def leaving_point(path: np.ndarray, view: np.ndarray) -> np.ndarray | None:
     """
     path = np.asarray(path, dtype=float)
     lo, hi = view
-    with np.errstate(invalid="ignore"):
-        inside = np.isfinite(path).all(axis=1) & np.all((path >= lo) & (path <= hi), axis=1)
-    if inside.all():
+    k = first_outside(path, view)
+    if k is None:
         return None
-    k = int(np.argmin(inside))
     p1 = path[k]
     if k == 0 or not np.isfinite(p1).all():
         p = path[k - 1] if k > 0 else np.clip(np.nan_to_num(p1, nan=0.0), lo, hi)
