@@ -57,7 +57,7 @@ def test_a_consistent_step_breaks_the_streak_and_a_missing_one_does_not():
 
 
 def test_threshold_depends_on_dof():
-    nis = np.full(6, 30.0)  # above the χ²(1) quantile (28.4), below the χ²(3) one (33.4)
+    nis = np.full(TEST.streak + 1, 30.0)  # above the χ²(1) quantile (28.4), below the χ²(3) one (33.4)
     assert _flags(nis, 1.0).all()
     assert not _flags(nis, 3.0).any()
 
@@ -76,11 +76,14 @@ def test_infinite_nis_and_non_finite_estimates_are_inconsistent():
 
 
 def test_no_nis_means_only_the_finiteness_test():
-    mean = np.zeros((8, 3, 2))
+    k = TEST.streak
+    mean = np.zeros((k + 3, 3, 2))
     mean[3:, 1] = np.inf
     f = detect_divergence(None, None, mean)
     assert f[:, [0, 2]].sum() == 0
-    np.testing.assert_array_equal(f[:, 1], [False] * 3 + [True] * 5)
+    np.testing.assert_array_equal(f[:, 1], [False] * 3 + [True] * k)
+    mean[4, 1] = 0.0  # one finite step in between: k - 1 in a row is not enough
+    assert not detect_divergence(None, None, mean)[:, 1].any()
 
 
 def test_options_are_checked_and_change_the_result():
@@ -90,18 +93,18 @@ def test_options_are_checked_and_change_the_result():
     nis = [BIG] * 2
     assert not _flags(nis).any()
     assert _flags(nis, test=DivergenceTest(streak=2)).all()
-    assert _flags([20.0] * 5, test=DivergenceTest(tail=1e-3)).all()  # χ²(1) isf(1e-3) = 10.8
-    assert not _flags([20.0] * 5).any()
+    assert _flags([20.0] * 20, test=DivergenceTest(tail=1e-3)).all()  # χ²(1) isf(1e-3) = 10.8
+    assert not _flags([20.0] * 20).any()
 
 
 def test_batched_equals_one_run_at_a_time_and_the_monitor():
     rng = np.random.default_rng(3)
-    K, M = 60, 40
+    K, M = 90, 40
     dof = rng.integers(0, 4, size=(K, M)).astype(float)
     nis = np.where(dof > 0, stats.chi2.rvs(np.maximum(dof, 1), random_state=rng), np.nan)
     # runs with streaks of huge NIS of random length and place
     for m in range(0, M, 2):
-        start, length = rng.integers(0, K - 8), rng.integers(1, 9)
+        start, length = rng.integers(0, K - 30), rng.integers(TEST.streak - 4, TEST.streak + 8)
         nis[start : start + length, m] = np.where(dof[start : start + length, m] > 0, BIG, np.nan)
     mean = rng.normal(size=(K, M, 4))
     mean[rng.integers(0, K), 5, 0] = np.nan
@@ -121,7 +124,7 @@ def test_batched_equals_one_run_at_a_time_and_the_monitor():
 
 
 def test_monitor_flags_at_the_step_that_completes_the_streak():
-    mon = DivergenceMonitor((1,))
+    mon = DivergenceMonitor((1,), DivergenceTest(streak=5))
     out = [bool(mon.update(v, 1, np.zeros((1, 2)))[0]) for v in [1.0, BIG, BIG, BIG, BIG, BIG, 1.0]]
     assert out == [False, False, False, False, False, True, True]
     assert mon.onset[0] == 1

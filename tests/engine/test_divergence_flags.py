@@ -95,9 +95,9 @@ def test_a_matched_kf_is_never_flagged():
     """200 runs × 100 steps of a KF on its own model: no false alarm.
 
     Expected false-alarm probability: the NIS of a matched KF are independent
-    χ²(2) draws, so a streak of 5 exceedances at tail 1e-6 starts at a given
-    step with probability 1e-30; over 2·10⁴ steps the chance of any flag is
-    below 2·10⁻²⁶.  The region test needs an estimate 10 path lengths from the
+    χ²(2) draws, so a streak of 20 exceedances at tail 1e-6 starts at a given
+    step with probability 1e-120; over 2·10⁴ steps the chance of any flag is
+    below 2·10⁻¹¹⁶.  The region test needs an estimate 10 path lengths from the
     truth, about 10⁴ σ here.  A single exceedance (probability 2 % over all
     steps) must not flag.
     """

@@ -265,7 +265,7 @@ def test_a_track_that_turns_inconsistent_is_flagged_diverged_and_stays_flagged()
     flagged = ["diverged" in e.flags for e in est]
     first = flagged.index(True)
     assert est[first].time > 20.0 and all(flagged[first:])
-    # a stream cannot look back: the flag starts at the step that completes the streak, after 5 inconsistent steps
+    # a stream cannot look back: the flag starts at the step that completes the streak, after `streak` inconsistent steps
     from pursuit.divergence import DivergenceTest
 
     over = [e.dof > 0 and e.nis > DivergenceTest().threshold(e.dof) for e in est[: first + 1]]
