@@ -32,6 +32,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from . import metrics
+from .divergence import DIVERGED_KEY, onset_step
 
 __all__ = [
     "Blocks",
@@ -236,7 +237,10 @@ class FilterStatistics:
       (fading factor, ESS, ...) over runs where it is finite.
 
     ``per_run`` holds ``mse:G`` (each run's time-averaged squared error of
-    group ``G``), ``(M,)``.
+    group ``G``), ``(M,)``, and, when the runs were tested for divergence,
+    ``diverged_step``: the 1-based step at which each run was flagged
+    diverged, NaN if never (:mod:`pursuit.divergence`).  The per-step count of
+    flagged runs is ``info:diverged``.
     """
 
     runs: int
@@ -299,6 +303,8 @@ def filter_statistics(
         nis = np.asarray(info["nis"], dtype=float)
         dof = np.broadcast_to(np.asarray(info.get("dof", 1), dtype=float), nis.shape)
         _finite_sums(out, "nis", nis, dof)
+    if DIVERGED_KEY in info:
+        out.per_run["diverged_step"] = onset_step(info[DIVERGED_KEY])
     for key, value in info.items():
         if key in ("nis", "dof"):
             continue

@@ -131,7 +131,7 @@ class MonteCarloResult:
         import html
 
         rows = self.summary()
-        wanted = ("filter", "rmse_position", "rmse_velocity", "anees", "anis", "wall_time_s")
+        wanted = ("filter", "rmse_position", "rmse_velocity", "diverged", "anees", "anis", "wall_time_s")
         columns = [c for c in wanted if any(c in r for r in rows)]
         caption = (
             f"<p><b>MonteCarloResult</b> {html.escape(self.scenario)}: {len(rows)} filters, {self.runs} runs, "
@@ -296,6 +296,31 @@ class MonteCarloResult:
         if average == "per-run":
             return float(run_sum(self.rmse_per_run(name, component)) / self.runs)
         raise ValueError(f"average: must be 'pooled' or 'per-run', got {average!r}")
+
+    # -- divergence -------------------------------------------------------------
+    def diverged_step(self, name: str) -> np.ndarray | None:
+        """``(M,)`` the 1-based step at which each run was flagged diverged (NaN: never); None if not tested.
+
+        See :mod:`pursuit.divergence` for the tests.  Available in both
+        storage modes.
+        """
+        return self.filter_statistics(name).per_run.get("diverged_step")
+
+    def divergence(self, name: str) -> dict[str, Any] | None:
+        """The diverged runs of a filter: ``{"diverged": count, "diverged_from_step": first step}``.
+
+        ``diverged_from_step`` is the earliest step at which any run was
+        flagged (None when no run diverged).  None when the runs were not
+        tested (``divergence=None``).
+        """
+        steps = self.diverged_step(name)
+        if steps is None:
+            return None
+        hit = np.isfinite(steps)
+        return {
+            "diverged": int(np.count_nonzero(hit)),
+            "diverged_from_step": int(np.min(steps[hit])) if hit.any() else None,
+        }
 
     # -- consistency ----------------------------------------------------------
     def nees(self, name: str) -> np.ndarray:
@@ -481,7 +506,12 @@ class MonteCarloResult:
         )
 
     def summary(self) -> list[dict[str, Any]]:
-        """One row per filter: RMSEs, per-component RMS, consistency, wall time."""
+        """One row per filter: RMSEs, diverged runs, per-component RMS, consistency, wall time.
+
+        The RMSEs include every run, diverged or not; ``diverged`` (how many
+        runs were flagged, :mod:`pursuit.divergence`) and
+        ``diverged_from_step`` (the earliest step flagged) stand beside them.
+        """
         rows = []
         for name, fr in self.filters.items():
             row: dict[str, Any] = {"filter": name}
@@ -489,6 +519,9 @@ class MonteCarloResult:
                 row["rmse_position"] = self.rmse(name, "position")
             if self.velocity_indices:
                 row["rmse_velocity"] = self.rmse(name, "velocity")
+            div = self.divergence(name)
+            if div is not None:  # beside the RMSE, which includes the diverged runs
+                row.update(div)
             for i, label in enumerate(self.state_labels):
                 row[f"rms_{label}"] = self.rmse(name, (i,))
             try:

@@ -21,7 +21,7 @@ def test_track_shapes_and_info(setup):
     assert tr.steps == 10 and tr.name == "KF" and tr.wall_time > 0
     assert "pred_mean" not in tr.info  # smoother data only on request
     tr2 = pu.run(pu.KalmanFilter(sc.motion, sc.measurement), sim.measurements, sim.prior, keep_cov=False, keep_info=["nis"])
-    assert tr2.cov is None and set(tr2.info) == {"nis"}
+    assert tr2.cov is None and set(tr2.info) == {"nis", "diverged"}  # the divergence flag is always kept
 
 
 def test_dts_equal_to_the_model_dt_change_nothing(setup):

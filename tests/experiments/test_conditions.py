@@ -29,9 +29,12 @@ def test_p2_experiment_produces_its_tables_and_figures(p2_output):
     names = [t.name for t in p2_output.tables]
     assert names == ["cumulative_rmse", "improvement", "paper_vs_measured", "fading", "details"]
     rmse = _table(p2_output, "cumulative_rmse")
-    assert rmse.columns == ["filter", "ideal_m", "actual_m", "abnormal_m"]
+    assert rmse.columns == ["filter", "ideal_m", "actual_m", "abnormal_m", "ideal_diverged", "actual_diverged", "abnormal_diverged"]
     assert [r[0] for r in rmse.rows] == ["EKF", "TFMKF", "EWFMKF", "STF", "IFMKF"]
-    assert all(np.isfinite(v) and v > 0 for r in rmse.rows for v in r[1:])
+    assert all(np.isfinite(v) and v > 0 for r in rmse.rows for v in r[1:4])
+    # each condition's count of diverged runs, beside its RMSE
+    for r in rmse.rows:
+        assert r[4:] == [p2_output.results[c].divergence(r[0])["diverged"] for c in ("ideal", "actual", "abnormal")]
     assert sorted(p2_output.figures) == [
         "consistency_abnormal", "consistency_actual", "consistency_ideal",
         "fading_factor", "rmse_position_abnormal", "rmse_position_actual", "rmse_position_ideal",

@@ -32,6 +32,9 @@ def test_p4_maneuver_reproduces_with_tables_and_figures(tmp_path, capsys):
     assert {r["filter"] for r in rows} == {"CS", "APCS", "Singer", "IMM-Singer", "MS"}
     assert {r["axis"] for r in rows} == {"x", "y", "z"}
     assert all(float(r["position_m"]) > 0 for r in rows)
+    # each filter's count of diverged runs, beside its RMSE (the same on every axis row)
+    counts = {(r["filter"], int(r["diverged"])) for r in rows}
+    assert len(counts) == 5 and all(0 <= n <= 6 for _, n in counts)
     meta = json.loads((folder / "run.json").read_text())
     assert meta["strongest_maneuver"] == {"axis": "y", "time_s": 67.0, "jump_m_s2": 90.0}
     assert meta["runs"] == 6

@@ -70,6 +70,11 @@ def test_a_sweep_runs_every_value_and_reports_paper_beside_measured(tmp_path):
     pf40 = next(r for r in summary.rows if r[0] == 40 and r[1] == "PF")
     assert paper.rows[0][3] == 4.7 and paper.rows[0][4] == pf40[2]
     assert {r[1] for r in pairs.rows} == {"ICS-PF", "PF"} and len(pairs.rows) == 4
+    # each row counts its filter's diverged runs at that value, beside the RMSE
+    col = summary.columns.index("diverged")
+    for row in summary.rows:
+        at = 20 if row[0] is None else row[0]  # a baseline runs once, with the first value
+        assert row[col] == out.results[f"N={at}"].divergence(row[1])["diverged"]
     assert {"rmse_vs_N", "time_vs_N", "N40_estimates", "N40_abs_error", "N40_rmse", "N40_particles"} <= set(out.figures)
 
 

@@ -252,3 +252,21 @@ def test_a_step_whose_nis_comes_out_negative_is_refused_not_written(wsn_model_pa
     assert res.estimates == []
     assert [(p.line, p.field) for p in res.problems] == [(2, "record"), (3, "record")]
     assert "round-off made its NIS negative" in res.problems[0].message
+
+
+def test_a_track_that_turns_inconsistent_is_flagged_diverged_and_stays_flagged():
+    model = load_track_model(EXAMPLES / "wsn-range.toml")
+    records = _from_file(EXAMPLES / "data" / "wsn-range.csv", "csv")
+    clean = track_records(records, model).estimates
+    assert not any("diverged" in e.flags for e in clean)
+    # from t = 20 s on, sensor A1 reads 300 m too long: the EKF cannot explain it with any state
+    bad = [dataclasses.replace(r, values=tuple(v + 300.0 for v in r.values)) if r.sensor == "A1" and r.time >= 20.0 else r for r in records]
+    est = track_records(bad, model).estimates
+    flagged = ["diverged" in e.flags for e in est]
+    first = flagged.index(True)
+    assert est[first].time > 20.0 and all(flagged[first:])
+    # a stream cannot look back: the flag starts at the step that completes the streak, after `streak` inconsistent steps
+    from pursuit.divergence import DivergenceTest
+
+    over = [e.dof > 0 and e.nis > DivergenceTest().threshold(e.dof) for e in est[: first + 1]]
+    assert over[-DivergenceTest().streak :] == [True] * DivergenceTest().streak

@@ -78,15 +78,15 @@ def test_index_page_links_every_report(chromium, artifacts, output):
 
 
 def _wide_output(folder: Path) -> Path:
-    """An output folder whose summary table is as wide as p3-upf's (16 columns of four-decimal numbers)."""
+    """An output folder whose summary table is as wide as p3-upf's (18 columns, with the diverged-run counts)."""
     from pursuit.report.output import write_output
     from pursuit.tables import ExperimentOutput, Table
 
     cols = ["variant", "l", "filter", "rmse", "ci95", "rms_x", "rms_vx", "rms_y", "rms_vy", "rmse_position",
-            "rmse_velocity", "nis_mean", "ess_mean", "resample_rate", "wall_time_s", "runs"]
+            "rmse_velocity", "diverged", "diverged_from_step", "nis_mean", "ess_mean", "resample_rate", "wall_time_s", "runs"]
     rows = [["4 corner nodes", 0.25, "UPF-local", 50.86116476155978, 7.463904868788435, 45.55308448769722, 0.8836507929462359,
-             22.62243520400156, 0.5517066736015148, 50.86116476155978, 1.04173844009471, 0.995416478342234, 121.25971906888066,
-             0.3147, 111.1715915089999953, 100]] * 4
+             22.62243520400156, 0.5517066736015148, 50.86116476155978, 1.04173844009471, 100, 100, 0.995416478342234,
+             121.25971906888066, 0.3147, 111.1715915089999953, 100]] * 4
     out = ExperimentOutput("wide", "Wide tables", "", [Table("summary", "Summary", cols, rows)], {}, {}, sidecar={"seed": 1, "runs": 100})
     return write_output(out, folder / "wide")
 

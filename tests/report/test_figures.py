@@ -187,3 +187,71 @@ def test_sweep_figure_marks_the_papers_values_and_the_limit():
     legend = [t.get_text() for t in ax.get_legend().get_texts()]
     assert {"PF, paper (Table 1)", "ICS-PF, paper (Table 1)", "MMSE limit (PF)"} <= set(legend)
     assert "H" not in (by["PF"].get_marker(), by["ICS-PF"].get_marker())
+
+
+def test_trajectory_keeps_the_truths_axes_and_marks_a_runaway_estimate():
+    from pursuit.report.figures import LEAVES_LABEL, VIEW_MARGIN, trajectory, view_limits
+
+    from ..engine.test_divergence_flags import SCENARIO, Runaway, _kfs
+
+    good, _ = _kfs()
+    result = monte_carlo(SCENARIO, [good, Runaway()], 3, 2)
+    assert np.abs(result.filters["runaway"].estimates[:, 0, 0]).max() > 1e6
+    anchors = np.array([[-5.0, -5.0]])
+    fig = trajectory(result, 0, landmarks=anchors)
+    assert figure_problems(fig) == []
+    ax = fig.get_axes()[0]
+    truth = result.truth[:, 0][:, [0, 2]]
+    lo, hi = np.vstack([truth, anchors]).min(axis=0), np.vstack([truth, anchors]).max(axis=0)
+    margin = VIEW_MARGIN * float(np.max(hi - lo))
+    assert ax.get_xlim() == pytest.approx((lo[0] - margin, hi[0] + margin))
+    assert ax.get_ylim() == pytest.approx((lo[1] - margin, hi[1] + margin))
+    np.testing.assert_allclose(view_limits(truth, anchors), [lo - margin, hi + margin])
+    marks = [c for c in ax.collections if c.get_label() == LEAVES_LABEL]
+    assert len(marks) == 1
+    (x, y), = marks[0].get_offsets()
+    assert x == pytest.approx(hi[0] + margin)  # on the right edge, where the estimate runs out
+    assert lo[1] - margin <= y <= hi[1] + margin
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert LEAVES_LABEL in labels
+    step = int(result.diverged_step("runaway")[0])
+    assert f"runaway (diverged at step {step})" in labels and good.name in labels
+
+
+def test_trajectory_against_time_keeps_the_truths_axes():
+    from pursuit.report.figures import LEAVES_LABEL, trajectory
+
+    from ..engine.test_divergence_flags import Runaway
+
+    result = monte_carlo(SMALL, [Runaway(start=5)], 2, 1)
+    result = dataclasses.replace(result, position_indices=(0,))  # one position component: drawn against time
+    fig = trajectory(result, 1)
+    ax = fig.get_axes()[0]
+    x = result.truth[:, 1, 0]
+    assert ax.get_ylim()[1] < x.max() + 0.3 * (x.max() - x.min())
+    assert [c for c in ax.collections if c.get_label() == LEAVES_LABEL]
+
+
+def test_leaving_point_is_on_the_edge_where_the_path_crosses_it():
+    from pursuit.report.figures import leaving_point
+
+    view = np.array([[0.0, 0.0], [10.0, 10.0]])
+    assert leaving_point(np.array([[1.0, 1.0], [9.0, 9.0]]), view) is None
+    np.testing.assert_allclose(leaving_point(np.array([[5.0, 5.0], [25.0, 15.0]]), view), [10.0, 7.5])
+    np.testing.assert_allclose(leaving_point(np.array([[5.0, 5.0], [np.nan, np.nan]]), view), [5.0, 5.0])
+    np.testing.assert_allclose(leaving_point(np.array([[-5.0, 50.0], [1.0, 1.0]]), view), [0.0, 10.0])
+
+
+def test_rmse_figure_names_diverged_runs_and_stays_readable():
+    from ..engine.test_divergence_flags import SCENARIO, Runaway, _kfs
+
+    good, _ = _kfs()
+    result = monte_carlo(SCENARIO, [good, Runaway()], 3, 2)
+    fig = rmse_over_time(result, "position", log=False)
+    assert figure_problems(fig) == []
+    ax = fig.get_axes()[0]
+    assert ax.get_yscale() == "log"  # the runaway's 1e14 m would flatten the KF's curve on a linear axis
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert labels == [good.name, "runaway (diverged in 3 of 3 runs)"]
+    alone = rmse_over_time(result, "position", log=False, filters=[good.name])
+    assert alone.get_axes()[0].get_yscale() == "linear"

@@ -84,3 +84,21 @@ def test_a_wide_path_gets_a_wide_figure():
     fw, fs = plot_track(wide), plot_track(square)
     assert fw.get_figwidth() == fs.get_figwidth()
     assert fw.get_figheight() < 0.6 * fs.get_figheight()
+
+
+def test_a_runaway_estimate_does_not_set_the_axes_and_is_marked():
+    from pursuit.report.figures import LEAVES_LABEL, VIEW_MARGIN
+
+    tr = _track()
+    truth = tr.mean[:, [0, 2]].copy()
+    mean = tr.mean.copy()
+    mean[30:, 0] = 10.0 ** np.arange(1, 11)  # runs away to 1e10 m
+    fig = plot_track(Track(mean, tr.cov, name="runaway"), truth=truth, sensors=[[0.0, 0.0]])
+    assert figure_problems(fig) == []
+    ax = fig.axes[0]
+    lo, hi = truth.min(axis=0), truth.max(axis=0)
+    margin = VIEW_MARGIN * float(np.max(hi - lo))
+    assert ax.get_xlim() == pytest.approx((lo[0] - margin, hi[0] + margin))
+    assert ax.get_ylim() == pytest.approx((lo[1] - margin, hi[1] + margin))
+    assert [c for c in ax.collections if c.get_label() == LEAVES_LABEL]
+    assert LEAVES_LABEL in [t.get_text() for t in fig.legends[0].get_texts()]

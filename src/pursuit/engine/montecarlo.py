@@ -26,6 +26,7 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from .._validation import positive_int
+from ..divergence import DIVERGED_KEY, DivergenceTest, outside_region
 from ..reduction import PartialStatistics, StatisticsAccumulator, component_groups, filter_statistics
 from ..results import STORE_MODES, FilterResult, MonteCarloResult
 from ..rng import run_streams
@@ -79,11 +80,15 @@ def run_chunk(
     keep_cov: bool = True,
     keep_info: Iterable[str] | None = None,
     on_filter_done: Callable[[], None] | None = None,
+    divergence: DivergenceTest | None = DivergenceTest(),
 ) -> ChunkResult:
     """Simulate runs ``[start, stop)`` and run every filter on them.
 
     A pure function of its arguments: any process that calls it with the
-    same arguments computes the same bits.
+    same arguments computes the same bits.  With ``divergence`` (the default
+    thresholds), each filter's info carries ``diverged``: the driver's
+    consistency test, or'ed with the region test against the truth and the
+    scenario's sensors (:mod:`pursuit.divergence`).
     """
     runs = range(start, stop)
     sim = scenario.simulate(run_streams(seed, runs, SCENARIO_STREAM), len(runs))
@@ -91,12 +96,35 @@ def run_chunk(
     for filt in filters:
         streams = run_streams(seed, runs, FILTER_STREAM)
         t0 = time.perf_counter()
-        track = run(filt, sim.measurements, sim.prior, rng=streams, keep_cov=keep_cov, keep_info=keep_info)
+        track = run(filt, sim.measurements, sim.prior, rng=streams, keep_cov=keep_cov, keep_info=keep_info, divergence=divergence)
         wall = time.perf_counter() - t0
-        tracks[filt.name] = FilterResult(filt.name, track.mean, track.cov, track.info, wall)
+        info = track.info
+        if divergence is not None:
+            outside = outside_region(
+                track.mean, sim.truth, scenario.position_indices, sensors=_sensors(scenario),
+                scale=_prior_scale(sim.prior, scenario.position_indices), test=divergence,
+            )
+            info = {**info, DIVERGED_KEY: info[DIVERGED_KEY] | np.logical_or.accumulate(outside, axis=0)}
+        tracks[filt.name] = FilterResult(filt.name, track.mean, track.cov, info, wall)
         if on_filter_done is not None:
             on_filter_done()
     return ChunkResult(start, stop, sim.times, sim.truth, sim.measurements, tracks)
+
+
+def _sensors(scenario: Any) -> np.ndarray | None:
+    """The scenario's sensor positions (its measurement model's ``anchors``), or None."""
+    anchors = getattr(getattr(scenario, "measurement", None), "anchors", None)
+    return None if anchors is None else np.atleast_2d(np.asarray(anchors, dtype=float))
+
+
+def _prior_scale(prior: Any, position_indices: Sequence[int]) -> np.ndarray | None:
+    """Each run's largest prior position standard deviation (the region's scale for a target that hardly moves)."""
+    cov = getattr(prior, "cov", None)
+    if cov is None or not len(position_indices):
+        return None
+    idx = list(position_indices)
+    var = np.diagonal(np.asarray(cov, dtype=float), axis1=-2, axis2=-1)[..., idx]
+    return np.sqrt(np.max(var, axis=-1))
 
 
 class Spans(abc.Sequence):
@@ -193,6 +221,7 @@ class ChunkTask:
     keep_info: tuple[str, ...] | None = None
     store: str = "full"
     keep_runs: int = DEFAULT_KEEP_RUNS
+    divergence: DivergenceTest | None = DivergenceTest()
 
     def __call__(self, start: int, stop: int, on_filter_done: Callable[[], None] | None = None):
         chunk = run_chunk(
@@ -204,6 +233,7 @@ class ChunkTask:
             keep_cov=self.keep_cov,
             keep_info=self.keep_info,
             on_filter_done=on_filter_done,
+            divergence=self.divergence,
         )
         if self.store == "full":
             return chunk
@@ -435,6 +465,7 @@ def monte_carlo(
     store: str | None = None,
     keep_runs: int | None = None,
     label: str | None = None,
+    divergence: DivergenceTest | None = DivergenceTest(),
 ) -> MonteCarloResult:
     """Compare filters on ``runs`` Monte Carlo runs of a scenario.
 
@@ -478,6 +509,10 @@ def monte_carlo(
         What the progress bar says it is computing, e.g. the experiment and
         the swept value (default: the scenario's name).  Computed in this
         process, the bar adds the filter running now.
+    divergence
+        The thresholds of the divergence tests (:mod:`pursuit.divergence`);
+        each filter's info then carries ``diverged`` and the summary counts
+        the diverged runs.  None: no test.
 
     Returns
     -------
@@ -528,6 +563,7 @@ def monte_carlo(
         keep_info=None if keep_info is None else tuple(keep_info),
         store=store,
         keep_runs=int(keep_runs),
+        divergence=divergence,
     )
     spans = _chunks(runs, chunk_size)
     base = label or getattr(scenario, "name", "runs")

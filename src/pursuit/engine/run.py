@@ -7,6 +7,7 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
+from ..divergence import DIVERGED_KEY, DivergenceMonitor, DivergenceTest, detect_divergence
 from ..rng import RNGLike, as_rng
 from ..track import SMOOTHER_KEYS, Track
 
@@ -24,6 +25,7 @@ def run(
     store_predictions: bool = False,
     keep_info: Iterable[str] | None = None,
     sequence: bool = True,
+    divergence: DivergenceTest | None = DivergenceTest(),
 ) -> Track:
     """Run a filter over a sequence of measurements.
 
@@ -56,6 +58,11 @@ def run(
         one batch axis and per-run PCG64 streams (:class:`pursuit.RunStreams`).
         The results are the same bits as step by step.  ``False`` always
         steps from Python.
+    divergence
+        The thresholds of the divergence test (:mod:`pursuit.divergence`):
+        the step info then carries ``diverged``, ``(K, *batch)`` bool, True
+        from the first step of a run's divergence on, whatever
+        ``keep_info`` says.  None: no test, no flag.
 
     Returns
     -------
@@ -83,15 +90,26 @@ def run(
         done = whole(state, zs, keep_cov=keep_cov)
         if done is not None:
             means, covs, infos = done
+            wall = time.perf_counter() - t0
+            flags = None
+            if divergence is not None:
+                flags = detect_divergence(infos.get("nis"), infos.get("dof"), means, covs, test=divergence)
             if wanted is not None:
                 infos = {key: value for key, value in infos.items() if key in wanted}
-            wall = time.perf_counter() - t0
+            if flags is not None:
+                infos = {**infos, DIVERGED_KEY: flags}
             return Track(mean=means, cov=covs, info=infos, name=getattr(filt, "name", type(filt).__name__), wall_time=wall)
     means = np.empty((K, *state.mean.shape))
     covs = np.empty((K, *state.mean.shape, state.mean.shape[-1])) if keep_cov else None
+    monitor = None if divergence is None else DivergenceMonitor(state.mean.shape[:-1], divergence)
+    t_monitor = 0.0
     for i in range(K):
         dt = None if dts is None else float(dts[i])
         state, info = filt.step(state, zs[i], k=i + 1, dt=dt)
+        if monitor is not None:  # not the filter's time: left out of wall_time
+            t1 = time.perf_counter()
+            monitor.update(info.get("nis"), info.get("dof"), state.mean, getattr(state, "cov", None))
+            t_monitor += time.perf_counter() - t1
         means[i] = state.mean
         if keep_cov:
             covs[i] = state.cov
@@ -107,5 +125,7 @@ def run(
             if buf is None:
                 buf = infos[key] = np.empty((K, *value.shape), dtype=value.dtype)
             buf[i] = value
-    wall = time.perf_counter() - t0
+    wall = time.perf_counter() - t0 - t_monitor
+    if monitor is not None:
+        infos[DIVERGED_KEY] = monitor.flags()
     return Track(mean=means, cov=covs, info=infos, name=getattr(filt, "name", type(filt).__name__), wall_time=wall)

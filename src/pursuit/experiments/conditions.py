@@ -158,14 +158,20 @@ class ConditionsPlan:
 
     # -- tables ---------------------------------------------------------------
     def _rmse_table(self, results: dict[str, MonteCarloResult]) -> Table:
-        cols = ["filter"] + [f"{c}_m" for c in results]
-        rows = [[name] + [cumulative_rmse(r, name, self.average) for r in results.values()] for name in self.filter_names]
+        cols = ["filter"] + [f"{c}_m" for c in results] + [f"{c}_diverged" for c in results]
+        rows = [
+            [name]
+            + [cumulative_rmse(r, name, self.average) for r in results.values()]
+            + [(r.divergence(name) or {}).get("diverged") for r in results.values()]
+            for name in self.filter_names
+        ]
         runs = next(iter(results.values())).runs
         return Table(
             "cumulative_rmse",
             f"Cumulative position RMSE (m, {self.average} average over {runs} runs) per filter and condition",
             cols,
             rows,
+            notes="*_diverged: runs flagged diverged in that condition (docs/concepts.md, diverged runs); their errors are in the RMSE.",
         )
 
     def _improvement_table(self, results: dict[str, MonteCarloResult]) -> Table:
@@ -227,7 +233,7 @@ class ConditionsPlan:
         )
 
     def _details_table(self, results: dict[str, MonteCarloResult]) -> Table:
-        keys = ("rmse_position", "rmse_velocity", "anees", "anis", "wall_time_s")
+        keys = ("rmse_position", "rmse_velocity", "diverged", "diverged_from_step", "anees", "anis", "wall_time_s")
         rows = []
         for cond, r in results.items():
             for row in r.summary():

@@ -121,13 +121,15 @@ def rmse_table(result: MonteCarloResult, axes: str) -> Table:
     rows = []
     everything = np.ones(result.steps, dtype=bool)
     for name in result.filter_names:
+        diverged = (result.divergence(name) or {}).get("diverged")
         for a, axis in enumerate(axes):
-            rows.append([name, axis, *(_mean_rmse(result, name, i, everything) for i in _axis_indices(result, a))])
+            rows.append([name, axis, *(_mean_rmse(result, name, i, everything) for i in _axis_indices(result, a)), diverged])
     return Table(
         "rmse",
         f"{result.scenario}: RMSE averaged over time (mean over steps of the RMSE over {result.runs} runs), seed {result.seed}",
-        ["filter", "axis", "position_m", "velocity_m_s", "acceleration_m_s2"],
+        ["filter", "axis", "position_m", "velocity_m_s", "acceleration_m_s2", "diverged"],
         rows,
+        notes="diverged: the filter's runs flagged diverged (docs/concepts.md, diverged runs), whose errors are in the RMSE.",
     )
 
 

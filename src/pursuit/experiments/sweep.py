@@ -415,6 +415,7 @@ class SweepPlan:
             row["rmse_position"] = result.rmse(name, "position")
         if result.velocity_indices:
             row["rmse_velocity"] = result.rmse(name, "velocity")
+        row.update(result.divergence(name) or {})  # diverged runs beside the RMSE (pursuit.divergence)
         nis = fr.info.get("nis")
         if nis is not None and np.isfinite(nis).any():
             row["nis_mean"] = float(np.nanmean(nis))
@@ -437,7 +438,8 @@ class SweepPlan:
         notes = (
             f"rmse: {what} of the {sw['component']} component, ci95 its 95 % confidence half-width; "
             f"rms_*: pooled per state component; an empty {self.label} marks a filter without that parameter "
-            "(run once). wall_time_s: filtering time of the whole Monte Carlo run on this machine."
+            "(run once). diverged: runs flagged diverged (docs/concepts.md, diverged runs), counted in the RMSEs; diverged_from_step: "
+            "the earliest step flagged. wall_time_s: filtering time of the whole Monte Carlo run on this machine."
         )
         return Table("summary", f"{self.name}: swept {self.label}", cols, [[r.get(c) for c in cols] for r in rows], notes)
 

@@ -9,6 +9,12 @@ a gap of 10³⁰⁰ s) is refused: the state stays as it was and the step's
 records are reported as bad (field ``time`` when a prediction alone over the
 gap already breaks the filter, else ``record``), so no NaN ever reaches the
 output.
+
+A filter that diverges is flagged, not hidden: the tracker runs the
+consistency test of :mod:`pursuit.divergence` step by step, and from the step
+that completes a streak of inconsistent NIS values on, every estimate carries
+the flag ``diverged`` (a stream cannot look back, so the flag starts at the
+end of the streak, not at its first step as in an experiment).
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ from typing import Iterable, Iterator
 
 import numpy as np
 
+from ..divergence import DIVERGED_KEY, DivergenceMonitor
 from ..rng import RunStreams
 from .initiate import initiate
 from .model import TrackModel
@@ -46,7 +53,8 @@ class Estimate:
     flags
         Names of the step's true boolean info entries (``gated``,
         ``repaired``, and any a filter adds), plus ``predict`` when nothing
-        was measured.
+        was measured and ``diverged`` once the track has failed the
+        divergence test (:mod:`pursuit.divergence`; it stays).
     lines
         Input lines of the step's records.
     cov
@@ -94,6 +102,7 @@ class Tracker:
         self.state = model.filter.init(model.prior, batch=(1,), rng=rng)
         self.time = model.prior_time
         self.k = 0
+        self.monitor = DivergenceMonitor((1,))
 
     def _try(self, z: np.ndarray, dt: float):
         """One filter step from the current state: ``(problem, state, info, mean, var)``, problem '' if healthy."""
@@ -139,6 +148,8 @@ class Tracker:
         flags = [key for key, value in info.items() if _true_flag(value)]
         if dof == 0:
             flags.append("predict")
+        if self.monitor.update(info.get("nis"), info.get("dof"), state.mean, state.cov)[0] and DIVERGED_KEY not in flags:
+            flags.append(DIVERGED_KEY)
         return Estimate(
             time=step.time,
             mean=mean,

@@ -14,6 +14,10 @@ from ..results import MonteCarloResult
 __all__ = [
     "rmse_over_time",
     "trajectory",
+    "view_limits",
+    "leaving_point",
+    "first_outside",
+    "mark_leaving",
     "fading_over_time",
     "consistency_over_time",
     "mark_events",
@@ -167,12 +171,23 @@ def rmse_over_time(
     events
         ``(time, label)`` pairs drawn as labelled vertical lines (e.g. an
         outlier).
+
+    A filter with runs flagged diverged (:mod:`pursuit.divergence`) says how
+    many in its legend label; if its RMSE reaches :data:`DWARF_RATIO` times
+    that of every filter without, the y axis is logarithmic even when
+    ``log`` is False, so the other curves stay readable.
     """
     fig, ax = _new()
     names = list(filters) if filters is not None else result.filter_names
     label = component if isinstance(component, str) else "state " + ",".join(map(str, component))
+    curves = {name: result.rmse_per_step(name, component) for name in names}
+    counts = {name: (result.divergence(name) or {}).get("diverged", 0) for name in names}
     for name in names:
-        ax.plot(result.times, result.rmse_per_step(name, component), label=name, linewidth=1.4)
+        n = counts[name]
+        text = f"{name} (diverged in {n} of {result.runs} runs)" if n else name
+        ax.plot(result.times, curves[name], label=text, linewidth=1.4)
+    if not log and _dwarfs_the_rest(curves, counts):
+        log = True  # a diverged filter's curve would flatten every other one on a linear axis
     if log:
         ax.set_yscale("log")
         plain_log_ticks(ax)
@@ -185,6 +200,24 @@ def rmse_over_time(
     ax.grid(True, alpha=0.3)
     legend_beside(ax)
     return fig
+
+
+DWARF_RATIO = 100.0
+"""A diverged filter's largest RMSE this many times the others' switches an RMSE figure to a log axis."""
+
+
+def _dwarfs_the_rest(curves: dict[str, np.ndarray], diverged: dict[str, int]) -> bool:
+    """Whether a filter with diverged runs reaches :data:`DWARF_RATIO` times the largest RMSE of the filters without."""
+    def top(names):
+        vals = [np.nanmax(np.where(np.isfinite(curves[n]), curves[n], np.nan), initial=0.0) for n in names]
+        return max(vals, default=0.0)
+
+    bad = [n for n in curves if diverged[n]]
+    good = [n for n in curves if not diverged[n]]
+    if not bad or not good:
+        return False
+    rest = top(good)
+    return rest > 0 and (top(bad) > DWARF_RATIO * rest or any(not np.isfinite(curves[n]).all() for n in bad))
 
 
 def mark_events(ax, events: Sequence[tuple[float, str]]) -> None:
@@ -208,6 +241,14 @@ def trajectory(
     With two or more position components the plot is the path in the plane
     (first two position axes); with one it is position against time; with
     none, the first state component against time.
+
+    The axes are those of the truth and the sensors (``landmarks``) with a
+    margin (:data:`VIEW_MARGIN`), never of the estimates: an estimate that
+    leaves them is cut at the edge and marked where it first leaves (legend
+    entry "estimate leaves the axes"), and a filter whose run was flagged
+    diverged (:mod:`pursuit.divergence`) says so, with the step, in its
+    legend label; a diverged run's estimate is drawn only up to where it
+    first leaves.
     """
     stored = result.stored()
     if not 0 <= run < stored.runs:
@@ -218,30 +259,130 @@ def trajectory(
     names = list(filters) if filters is not None else result.filter_names
     pos = list(result.position_indices) or [0]
     truth = result.truth[:, run, :]
+    exits = []
     if len(pos) >= 2:
         i, j = pos[0], pos[1]
         ax.plot(truth[:, i], truth[:, j], color="black", linewidth=2.0, label="truth")
+        lm = np.asarray(landmarks, dtype=float).reshape(-1, 2) if landmarks is not None and len(landmarks) else None
+        view = view_limits(truth[:, [i, j]], lm)
         for name in names:
-            est = result.filters[name].estimates[:, run, :]
-            ax.plot(est[:, i], est[:, j], linewidth=1.2, label=name)
-        if landmarks is not None and len(landmarks):
-            lm = np.asarray(landmarks)
+            est = result.filters[name].estimates[:, run, :][:, [i, j]]
+            out = leaving_point(est, view)
+            if out is not None and _flagged_label(result, name, run) != name:
+                # a diverged run is drawn up to where it leaves: its later wanderings would cross the whole plot
+                est = np.vstack([est[: first_outside(est, view)], out])
+            ax.plot(est[:, 0], est[:, 1], linewidth=1.2, label=_flagged_label(result, name, run))
+            exits.append(out)
+        if lm is not None:
             ax.scatter(lm[:, 0], lm[:, 1], marker="^", color="tab:red", zorder=5, label="sensors")
         ax.set_xlabel(labelled(result.state_labels[i], result.unit(i)))
         ax.set_ylabel(labelled(result.state_labels[j], result.unit(j)))
-        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_aspect("equal", adjustable="box")  # "datalim" would move the limits set below
     else:
         i = pos[0]
-        ax.plot(result.times, truth[:, i], color="black", linewidth=2.0, label="truth")
+        t = np.asarray(result.times, dtype=float)
+        ax.plot(t, truth[:, i], color="black", linewidth=2.0, label="truth")
+        span = np.array([[t[0], np.nanmin(truth[:, i])], [t[-1], np.nanmax(truth[:, i])]])
+        view = view_limits(span, None, axes=(1,))
+        if t[-1] > t[0]:
+            view[:, 0] = t[0], t[-1]  # time: the whole run, no margin
         for name in names:
-            ax.plot(result.times, result.filters[name].estimates[:, run, i], linewidth=1.2, label=name)
+            est = result.filters[name].estimates[:, run, i]
+            ax.plot(t, est, linewidth=1.2, label=_flagged_label(result, name, run))
+            exits.append(leaving_point(np.column_stack([t, est]), view))
         ax.set_xlabel("time (s)")
         ax.set_ylabel(labelled(result.state_labels[i], result.unit(i)))
+    mark_leaving(ax, [e for e in exits if e is not None])
+    ax.set_xlim(*view[:, 0])
+    ax.set_ylim(*view[:, 1])
+    ax.set_autoscale_on(False)
     ax.set_title(title or f"Truth and estimates, run {run}")
     ax.grid(True, alpha=0.3)
     distinguish(ax)
     legend_beside(ax)
     return fig
+
+
+VIEW_MARGIN = 0.25
+"""Share of the truth's (and sensors') extent added on every side of a state-space plot."""
+
+
+def view_limits(points: np.ndarray, sensors: np.ndarray | None = None, *, axes: Sequence[int] = (0, 1)) -> np.ndarray:
+    """``(2, 2)`` limits ``[[x0, y0], [x1, y1]]`` of the finite ``points`` (and ``sensors``) with a margin.
+
+    The margin is :data:`VIEW_MARGIN` of the largest extent among ``axes``
+    (the axes in the same unit) on each of them; the other axes get that
+    share of their own extent.  A point-like extent gets a margin of 1 unit.
+    """
+    p = np.asarray(points, dtype=float).reshape(-1, 2)
+    if sensors is not None and len(sensors):
+        p = np.vstack([p, np.asarray(sensors, dtype=float).reshape(-1, 2)])
+    p = p[np.isfinite(p).all(axis=1)]
+    if not len(p):
+        return np.array([[0.0, 0.0], [1.0, 1.0]])
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    extent = hi - lo
+    common = max(float(np.max(extent[list(axes)])), 0.0)
+    margin = VIEW_MARGIN * extent
+    for a in axes:
+        margin[a] = VIEW_MARGIN * common
+    margin = np.where(margin > 0, margin, np.maximum(1.0, 1e-9 * np.abs(lo)))
+    return np.array([lo - margin, hi + margin])
+
+
+def first_outside(path: np.ndarray, view: np.ndarray) -> int | None:
+    """Index of the first point of a ``(K, 2)`` path outside the box ``view`` (non-finite counts), or None."""
+    path = np.asarray(path, dtype=float)
+    lo, hi = view
+    with np.errstate(invalid="ignore"):
+        inside = np.isfinite(path).all(axis=1) & np.all((path >= lo) & (path <= hi), axis=1)
+    return None if inside.all() else int(np.argmin(inside))
+
+
+def leaving_point(path: np.ndarray, view: np.ndarray) -> np.ndarray | None:
+    """Where a ``(K, 2)`` path first leaves the box ``view`` (on its edge), or None if it stays inside.
+
+    A non-finite point counts as outside; a path that starts outside is
+    marked at its first point, clipped to the box.
+    """
+    path = np.asarray(path, dtype=float)
+    lo, hi = view
+    k = first_outside(path, view)
+    if k is None:
+        return None
+    p1 = path[k]
+    if k == 0 or not np.isfinite(p1).all():
+        p = path[k - 1] if k > 0 else np.clip(np.nan_to_num(p1, nan=0.0), lo, hi)
+        return np.clip(p, lo, hi)
+    p0 = path[k - 1]
+    d = p1 - p0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(d > 0, (hi - p0) / d, np.where(d < 0, (lo - p0) / d, np.inf))
+    return np.clip(p0 + float(np.min(t)) * d, lo, hi)
+
+
+LEAVES_LABEL = "estimate leaves the axes"
+"""The legend entry of the marks where estimates leave a state-space plot."""
+
+
+def mark_leaving(ax, points: Sequence[np.ndarray]) -> None:
+    """Mark where estimates leave the axes: red crosses on the edge, one legend entry."""
+    if not points:
+        return
+    xy = np.asarray(points, dtype=float)
+    ax.scatter(xy[:, 0], xy[:, 1], marker="X", s=70, color="tab:red", edgecolor="white", linewidth=0.6,
+               zorder=6, clip_on=False, label=LEAVES_LABEL)
+
+
+def _flagged_label(result: MonteCarloResult, name: str, run: int) -> str:
+    """The filter's name, with the step at which this run was flagged diverged, if it was."""
+    flags = result.filters[name].info.get("diverged")
+    if flags is None:
+        return name
+    col = np.asarray(flags)[:, run]
+    if not col.any():
+        return name
+    return f"{name} (diverged at step {int(np.argmax(col)) + 1})"
 
 
 def fading_over_time(

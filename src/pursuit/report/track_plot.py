@@ -9,6 +9,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Ellipse
 
 from ..track import Track
+from .figures import leaving_point, mark_leaving, view_limits
 
 __all__ = ["plot_track", "ellipse_axes"]
 
@@ -76,6 +77,13 @@ def plot_track(
     -------
     Figure
         The figure the axes belong to.
+
+    Notes
+    -----
+    The axes are those of the truth (without one, of the measured positions)
+    and the sensors, with a margin, never of the estimate: an estimate that
+    leaves them is cut at the edge and marked where it first leaves
+    ("estimate leaves the axes").  With none of those, the axes fit the estimate.
     """
     mean = np.asarray(track.mean, dtype=float)
     if mean.ndim == 3 and mean.shape[1] == 1:
@@ -112,6 +120,15 @@ def plot_track(
                 Ellipse((mean[k, i], mean[k, j]), w, h, angle=angle, facecolor=(1.0, 0.5, 0.05, 0.12), edgecolor="tab:orange",
                         linewidth=0.9, zorder=3.5, label=label)
             )
+    ref = [np.asarray(a, dtype=float).reshape(-1, 2) for a in (truth if truth is not None else measurements, sensors)
+           if a is not None and len(a)]
+    if ref:
+        view = view_limits(np.vstack(ref))
+        exit_at = leaving_point(mean[:, [i, j]], view)
+        mark_leaving(ax, [] if exit_at is None else [exit_at])
+        ax.set_xlim(*view[:, 0])
+        ax.set_ylim(*view[:, 1])
+        ax.set_autoscale_on(False)
     ax.set_xlabel(f"{labels[0]} ({unit})" if unit else labels[0])
     ax.set_ylabel(f"{labels[1]} ({unit})" if unit else labels[1])
     ax.set_aspect("equal", adjustable="box")  # metres the same both ways: a turn looks like a turn
