@@ -216,7 +216,7 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
     logw = np.ascontiguousarray(state.logw, dtype=float).reshape(B, N)
     zf = np.ascontiguousarray(z, dtype=float).reshape(B, m)
     valid = ~np.isnan(zf)
-    kk = 3 if search.step_scaling == "relative" else 2
+    kk = 3 if search.scaling == "relative" else 2
     n_norm = search.n_iter * kk * N * n
     n_unif = search.n_iter * (N * n + 1 + 2 * N)
     addrs, per_run = run_stream_addresses(rng, work)
@@ -228,13 +228,13 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
         uniforms = np.ascontiguousarray(rng.random((*batch, n_unif)).reshape(B, n_unif))
     else:
         normals, uniforms = np.empty((B, 0)), np.empty((B, 0))
-    sequential = filt.weight_mode == "sequential"
+    sequential = filt.mode == "sequential"
     # the NumPy fitness carries the normalising constant unless the stock all-measured fast path applies
     include_const = bool(hs.angle or not valid.all())
     alphas = np.array([search.alpha(t) for t in range(search.n_iter)] or [0.0])
     pas = np.array([search.pa(t) for t in range(search.n_iter)] or [0.0])
     trend = {"off": CK.TREND_OFF, "exp": CK.TREND_EXP, "linear": CK.TREND_LINEAR}[search.trend]
-    scaling = {"relative": CK.SCALE_RELATIVE, "absolute": CK.SCALE_ABSOLUTE, "std": CK.SCALE_STD}[search.step_scaling]
+    scaling = {"relative": CK.SCALE_RELATIVE, "absolute": CK.SCALE_ABSOLUTE, "std": CK.SCALE_STD}[search.scaling]
     lower = np.full(n, -np.inf) if search.lower is None else np.broadcast_to(np.asarray(search.lower, float), (n,)).copy()
     upper = np.full(n, np.inf) if search.upper is None else np.broadcast_to(np.asarray(search.upper, float), (n,)).copy()
     use_stop = search.f_stop is not None
