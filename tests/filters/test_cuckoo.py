@@ -14,8 +14,12 @@ from scipy.special import logsumexp
 
 import pursuit as pu
 from pursuit.filters.cuckoo import CSPF, ICSPF, CuckooSearch, levy_steps, mantegna_sigma
+from pursuit.filters.cuckoo_mh import propagate_in_noise_space
+from pursuit.models import ConstantVelocity, LinearGaussian, LinearMotion
+from pursuit.models.maneuver import CurrentStatistical
 from pursuit.rng import run_streams
 from pursuit.scenarios.ungm import UNGM
+from pursuit.scenarios.wsn import WSNRange
 
 
 def test_mantegna_sigma_test_vector():
@@ -158,10 +162,6 @@ def test_the_greedy_moves_raise_the_likelihood_of_the_particles():
 # --------------------------------------------------------------------------
 # acceptance="mh": resample-move with MH cuckoo moves (docs/spec/01 "MH cuckoo moves")
 # --------------------------------------------------------------------------
-from pursuit.filters.cuckoo_mh import propagate_in_noise_space  # noqa: E402
-from pursuit.models import ConstantVelocity, LinearGaussian, LinearMotion  # noqa: E402
-from pursuit.models.maneuver import CurrentStatistical  # noqa: E402
-from pursuit.scenarios.wsn import WSNRange  # noqa: E402
 
 _SEARCHES = {
     "cs": lambda it: CuckooSearch(

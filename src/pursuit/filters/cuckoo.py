@@ -71,6 +71,7 @@ import numpy as np
 
 from .._validation import in_range, nonnegative, positive, time_step
 from ..rng import RunStreams
+from .cuckoo_mh import mh_moves, propagate_in_noise_space
 from .particle import (
     ParticleFilterBase,
     ParticleState,
@@ -80,7 +81,6 @@ from .particle import (
     propagate_particles,
     weighted_moments,
 )
-from .cuckoo_mh import mh_moves, propagate_in_noise_space
 
 __all__ = [
     "mantegna_sigma",
