@@ -143,11 +143,21 @@ def test_bootstrap_pf_cv_agrees_with_missing_data(kind):
 
 
 CUCKOO = {
+    # acceptance="mh" (the default)
     "ics": lambda m, h, be: pu.ICSPF(m, h, particles=60, backend=be),
     "cs": lambda m, h, be: pu.CSPF(m, h, particles=60, backend=be),
-    "ics-sequential-best": lambda m, h, be: pu.ICSPF(m, h, particles=60, weight_mode="sequential", estimate="best", backend=be),
-    "ics-options": lambda m, h, be: pu.ICSPF(
-        m, h, particles=60, backend=be,
+    "ics-mh-options": lambda m, h, be: pu.ICSPF(
+        m, h, particles=61, backend=be, resampler="stratified", estimate="weighted",
+        search=CuckooSearch(n_iter=4, trend="linear", discovery="literal_pa", beta=1.2),
+    ),
+    # the paper-literal greedy search
+    "ics-greedy": lambda m, h, be: pu.ICSPF(m, h, particles=60, acceptance="greedy", backend=be),
+    "cs-greedy": lambda m, h, be: pu.CSPF(m, h, particles=60, acceptance="greedy", backend=be),
+    "ics-greedy-sequential-best": lambda m, h, be: pu.ICSPF(
+        m, h, particles=60, acceptance="greedy", weight_mode="sequential", estimate="best", backend=be
+    ),
+    "ics-greedy-options": lambda m, h, be: pu.ICSPF(
+        m, h, particles=60, backend=be, acceptance="greedy",
         search=CuckooSearch(n_iter=5, step_scaling="absolute", trend="linear", discovery="literal_pa", f_stop=0.95, beta=1.2),
     ),
 }
@@ -171,10 +181,31 @@ CUCKOO_MEASUREMENTS = {
 
 @SAME_ELEMENTARY_FUNCTIONS
 @pytest.mark.parametrize("kind", sorted(CUCKOO_MEASUREMENTS))
-def test_cuckoo_pf_cv_agrees_with_missing_data(kind):
+@pytest.mark.parametrize("variant", ["ics", "cs", "ics-greedy"])
+def test_cuckoo_pf_cv_agrees_with_missing_data(kind, variant):
     meas = CUCKOO_MEASUREMENTS[kind]
     mot, zs, prior = _cv_data(meas, M=6, T=15)
-    _same_tracks(lambda be: CUCKOO["ics"](mot, meas, be), zs, prior, STREAMS)
+    _same_tracks(lambda be: CUCKOO[variant](mot, meas, be), zs, prior, STREAMS)
+
+
+@SAME_ELEMENTARY_FUNCTIONS
+@pytest.mark.parametrize("variant", ["ics", "cs"])
+def test_mh_cuckoo_pf_agrees_particle_for_particle(variant):
+    """The MH kernel takes the NumPy filter's accept decisions: the same particles and acceptance after every step."""
+    meas = CUCKOO_MEASUREMENTS["range"]
+    mot, zs, prior = _cv_data(meas, M=4, T=10)
+    states = []
+    for be in ("numpy", "numba"):
+        filt = CUCKOO[variant](mot, meas, be)
+        st = filt.init(prior, batch=(4,), rng=run_streams(5, range(4), 1))
+        acc = []
+        for k in range(zs.shape[0]):
+            st, info = filt.step(st, zs[k])
+            acc.append(info["acceptance"])
+        states.append((st, np.array(acc)))
+    (a, acc_a), (b, acc_b) = states
+    assert np.array_equal(acc_a, acc_b)
+    _close(a.particles, b.particles, "particles")
 
 
 @pytest.mark.parametrize("cls", [pu.CSPF, pu.ICSPF], ids=["cs-pf", "ics-pf"])
@@ -274,7 +305,7 @@ def test_user_models_fall_back_with_a_warning():
     with pytest.warns(CompiledBackendWarning, match="PartialUPF"):
         pu.PartialUPF(ConstantVelocity(), meas, particles=20, backend="numba")
     with pytest.warns(CompiledBackendWarning, match="step_scaling='std'"):
-        pu.ICSPF(ConstantVelocity(), meas, particles=20, search=CuckooSearch(step_scaling="std"), backend="numba")
+        pu.ICSPF(ConstantVelocity(), meas, particles=20, acceptance="greedy", search=CuckooSearch(step_scaling="std"), backend="numba")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert pu.UnscentedKalmanFilter(ConstantVelocity(), meas, backend="numba").compiled

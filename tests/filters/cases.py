@@ -156,9 +156,13 @@ CASES += [
     Case("ics-pf", lambda s: ICSPF(s.motion, s.measurement, particles=100, search=CuckooSearch(n_iter=3)), **_PF),
     Case(
         "ics-pf-sequential-stop",
-        lambda s: ICSPF(s.motion, s.measurement, particles=100, weight_mode="sequential", search=CuckooSearch(n_iter=4, f_stop=0.9)),
+        lambda s: ICSPF(
+            s.motion, s.measurement, particles=100, acceptance="greedy", weight_mode="sequential", search=CuckooSearch(n_iter=4, f_stop=0.9)
+        ),
         **_PF,
     ),
+    Case("ics-pf-greedy", lambda s: ICSPF(s.motion, s.measurement, particles=100, acceptance="greedy", search=CuckooSearch(n_iter=3)), **_PF),
+    Case("ics-pf-weighted", lambda s: ICSPF(s.motion, s.measurement, particles=100, estimate="weighted", search=CuckooSearch(n_iter=3)), **_PF),
 ]
 
 
@@ -185,9 +189,11 @@ if importlib.util.find_spec("numba") is not None:
         Case(
             "ics-pf-sequential-stop-numba",
             lambda s: ICSPF(
-                s.motion, s.measurement, particles=100, weight_mode="sequential", search=CuckooSearch(n_iter=4, f_stop=0.9), **_NB
+                s.motion, s.measurement, particles=100, acceptance="greedy", weight_mode="sequential",
+                search=CuckooSearch(n_iter=4, f_stop=0.9), **_NB
             ),
             **_PF,
         ),
+        Case("cs-pf-numba", lambda s: CSPF(s.motion, s.measurement, particles=100, search=CuckooSearch(n_iter=3, trend="off"), **_NB), **_PF),
     ]
     NONLINEAR_CASES = [c for c in CASES if c.id != "kf" and not c.id.startswith("kf-") and c.scenario is None]

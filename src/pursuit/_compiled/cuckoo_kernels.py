@@ -26,7 +26,7 @@ from numba import njit, prange
 
 from .common import LOG_2PI, copy_by_counts, n_uniforms, resample_counts, serial_and_parallel, wrap
 from .model_math import h_row
-from .pf_kernels import exp_shifted_run, measure_run, moments_run, predictive_run
+from .pf_kernels import _weigh_run, exp_shifted_run, measure_run, moments_run, predictive_run
 from .streams import fill_normal, fill_random
 
 _EPS = 1e-12
@@ -322,3 +322,218 @@ def _cuckoo_step(particles, draws, obs, sensor, search, opts, out):
 
 
 cuckoo_step_serial, cuckoo_step_parallel = serial_and_parallel(_cuckoo_step, cache=True, error_model="numpy")
+
+
+# --------------------------------------------------------------------------
+# acceptance="mh": resample-move with Metropolis-Hastings cuckoo moves
+# --------------------------------------------------------------------------
+@njit(cache=True, error_model="numpy")
+def _mh_try(i, prop, X, Mx, XI, F, LT, G, u, sensor, z, valid, measured, add, xc, hbuf):
+    """Metropolis test of noise ``prop`` (r,) for particle i, in place; returns 1 if accepted.
+
+    The arithmetic of :func:`pursuit.filters.cuckoo_mh.mh_moves`: x = m + Σ_c G[:, c] ξ_c
+    column by column, log π = (Σ_c ξ_c²)(−½) + fitness, accept when log u < Δ.
+    """
+    n, r = G.shape
+    for j in range(n):
+        x = Mx[i, j]
+        for c in range(r):
+            x += G[j, c] * prop[c]
+        xc[0, j] = x
+    fn = _fitness(sensor, xc, 0, z, valid, measured, add, hbuf)
+    q = prop[0] * prop[0]
+    for c in range(1, r):
+        q += prop[c] * prop[c]
+    ltn = q * -0.5 + fn
+    if math.log(u) < ltn - LT[i]:
+        for c in range(r):
+            XI[i, c] = prop[c]
+        for j in range(n):
+            X[i, j] = xc[0, j]
+        F[i] = fn
+        LT[i] = ltn
+        return 1
+    return 0
+
+
+@njit(cache=True, error_model="numpy")
+def _other_mean(F, i0, i1):
+    """Mean of exp(F[i0:i1]) summed left to right (0 for an empty half)."""
+    if i1 <= i0:
+        return 0.0
+    acc = 0.0
+    for i in range(i0, i1):
+        acc += math.exp(F[i])
+    return acc / (i1 - i0)
+
+
+@njit(cache=True, error_model="numpy")
+def mh_search_run(X, Mx, XI, F, G, normals, uniforms, search, sensor, z, valid, measured, add):
+    """The MH cuckoo moves of one run, in place on X (N, n), XI (N, r), F (N,); returns the accepted moves.
+
+    ``normals`` (n_iter·2·N·r) and ``uniforms`` (n_iter·(N(r+3)+2)) are the
+    run's draws in the layout of :func:`pursuit.filters.cuckoo_mh.mh_layout`.
+    """
+    n_iter, alphas, pas, amin, amax = search.n_iter, search.alphas, search.pas, search.alpha_min, search.alpha_max
+    trend, kappa, beta, sigma_u, yang = search.trend, search.kappa, search.beta, search.sigma_u, search.yang
+    N, n = X.shape
+    r = G.shape[1]
+    h = N // 2
+    size = N * r + 3 * N + 2
+    LT = np.empty(N)
+    for i in range(N):
+        q = XI[i, 0] * XI[i, 0]
+        for c in range(1, r):
+            q += XI[i, c] * XI[i, c]
+        LT[i] = q * -0.5 + F[i]
+    prop = np.empty(r)
+    xc = np.empty((1, n))
+    hbuf = np.empty((1, z.shape[0]))
+    starts = (0, h)
+    ends = (h, N)
+    alpha = np.empty(2)
+    fprev = np.empty(2)
+    fnow = np.empty(2)
+    accepted = 0
+    for t in range(n_iter):
+        a_t = alphas[t]
+        pa = pas[t]
+        ub = t * size
+        alpha[0] = a_t
+        alpha[1] = a_t
+        if trend != TREND_OFF:
+            fnow[0] = _other_mean(F, h, N)
+            fnow[1] = _other_mean(F, 0, h)
+            if t > 0:
+                for j in range(2):
+                    delta = (fnow[j] - fprev[j]) / (fprev[j] + _EPS)
+                    fac = math.exp(-kappa * delta) if trend == TREND_EXP else 1.0 + kappa * delta
+                    alpha[j] = min(max(a_t * fac, amin), amax)
+            fprev[0] = fnow[0]
+            fprev[1] = fnow[1]
+        # Lévy flights, A then B
+        for j in range(2):
+            for i in range(starts[j], ends[j]):
+                for c in range(r):
+                    L = _mantegna(normals[((t * 2) * N + i) * r + c], normals[((t * 2 + 1) * N + i) * r + c], beta, sigma_u)
+                    prop[c] = XI[i, c] + L * alpha[j]
+                u = uniforms[ub + N * r + N + i]
+                accepted += _mh_try(i, prop, X, Mx, XI, F, LT, G, u, sensor, z, valid, measured, add, xc, hbuf)
+        # discovery, partners from the other half
+        for j in range(2):
+            o0 = starts[1 - j]
+            mo = ends[1 - j] - o0
+            if mo < 2:
+                continue
+            npairs = mo * (mo - 1)
+            gamma = uniforms[ub + N * r + 3 * N + j]
+            for i in range(starts[j], ends[j]):
+                idx = math.floor(uniforms[ub + N * r + i] * npairs)
+                if idx > npairs - 1:
+                    idx = npairs - 1
+                k = np.int64(idx)
+                p1 = k // (mo - 1)
+                qq = k - p1 * (mo - 1)
+                p2 = qq + (1 if qq >= p1 else 0)
+                for c in range(r):
+                    s = uniforms[ub + i * r + c]
+                    K = (s > pa) if yang else (s < pa)
+                    d = (XI[o0 + p1, c] - XI[o0 + p2, c]) * (1.0 if K else 0.0)
+                    d *= gamma
+                    prop[c] = XI[i, c] + d
+                u = uniforms[ub + N * r + 2 * N + i]
+                accepted += _mh_try(i, prop, X, Mx, XI, F, LT, G, u, sensor, z, valid, measured, add, xc, hbuf)
+    return accepted
+
+
+@njit(cache=True, error_model="numpy")
+def _mh_run(b, particles, buffers, streams, obs, G, sensor, search, opts, pf, stats):
+    """The MH step of run b (:func:`_mh_step`)."""
+    Xprop, Mprop, XIprop, logw = particles
+    ures, normals, uniforms = buffers
+    z, valid = obs
+    fbest, iters, accepted = stats
+    addrs, per_run = streams
+    include_const, weighted, rkind = opts
+    n_iter = search.n_iter
+    N, n = Xprop.shape[1], Xprop.shape[2]
+    r = G.shape[1]
+    logN = math.log(N)
+    e = np.empty(N)
+    # the bootstrap PF's measurement step: info, weighted moments, ESS, need = measured
+    _weigh_run(b, Xprop[b], logw, logN, z, valid, sensor, -1.0, pf, e)
+    nd = pf.need[b]
+    X = pf.particles[b]
+    Mx = np.empty((N, n))
+    XI = np.empty((N, r))
+    if nd:
+        U = ures[b]
+        if per_run:
+            fill_random(addrs[b], U)
+        c = np.empty(N)
+        tmp = np.empty(N)
+        counts = np.empty(N, dtype=np.int64)
+        resample_counts(rkind, e, U, c, tmp, counts)
+        copy_by_counts(Xprop[b], counts, X)
+        copy_by_counts(Mprop[b], counts, Mx)
+        copy_by_counts(XIprop[b], counts, XI)
+        lw = pf.logw[b]
+        for i in range(N):
+            lw[i] = -logN
+    else:
+        for i in range(N):
+            for j in range(n):
+                X[i, j] = Xprop[b, i, j]
+                Mx[i, j] = Mprop[b, i, j]
+            for c in range(r):
+                XI[i, c] = XIprop[b, i, c]
+    if per_run and n_iter > 0:
+        fill_normal(addrs[b], normals[b])
+        fill_random(addrs[b], uniforms[b])
+    m = z.shape[1]
+    measured = False
+    for j in range(m):
+        if valid[b, j]:
+            measured = True
+    F = np.empty(N)
+    hb = np.empty((1, m))
+    for i in range(N):
+        F[i] = _fitness(sensor, X, i, z[b], valid[b], measured, include_const, hb)
+    acc = 0
+    if n_iter > 0:
+        acc = mh_search_run(X, Mx, XI, F, G, normals[b], uniforms[b], search, sensor, z[b], valid[b], measured, include_const)
+    if not weighted:
+        # weights after the moves: uniform where the run resampled, else the (predictive) weights
+        s = 0.0
+        if nd:
+            for i in range(N):
+                e[i] = 1.0
+            s = float(N)
+        else:
+            for i in range(N):
+                s += e[i]
+        moments_run(X, e, s, pf.mean[b], pf.cov[b])
+    fmax = -np.inf
+    for i in range(N):
+        if F[i] > fmax:
+            fmax = F[i]
+    fbest[b] = fmax
+    iters[b] = n_iter
+    accepted[b] = acc
+
+
+def _mh_step(particles, buffers, streams, obs, G, sensor, search, opts, pf, stats):
+    """One CS-PF / ICS-PF step with MH moves for every run; outputs in place.
+
+    ``particles`` is ``(X (B, N, n) propagated, M (B, N, n) = f(x_{k−1}), XI (B, N, r), logw (B, N))``,
+    ``buffers`` ``(resampler uniforms (B, ·), normals (B, ·), uniforms (B, ·))``, filled here
+    in that order when ``streams`` (a :class:`~.kernel_args.Draws`) is per run, ``obs``
+    ``(z, valid)``, ``G`` (n, r) the noise factor, ``opts`` a :class:`~.kernel_args.MHOptions`,
+    ``pf`` the :class:`~.kernel_args.PFOutputs` and ``stats`` ``(fitness_best, iterations, accepted)``.
+    Every argument is a flat tuple, as numba's parallel loops need.
+    """
+    for rr in prange(particles[0].shape[0]):
+        _mh_run(np.int64(rr), particles, buffers, streams, obs, G, sensor, search, opts, pf, stats)
+
+
+mh_step_serial, mh_step_parallel = serial_and_parallel(_mh_step, cache=True, error_model="numpy")

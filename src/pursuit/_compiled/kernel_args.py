@@ -28,6 +28,7 @@ __all__ = [
     "SearchArgs",
     "CuckooOptions",
     "CuckooOutputs",
+    "MHOptions",
     "SigmaPoints",
     "GaussOutputs",
     "GaussSequenceOutputs",
@@ -143,6 +144,14 @@ class CuckooOutputs(NamedTuple):
     fitness_best: np.ndarray  # (B,)
     iterations: np.ndarray  # (B,) int64
     accepted: np.ndarray  # (B,) int64
+
+
+class MHOptions(NamedTuple):
+    """The switches of a CS-PF / ICS-PF step with ``acceptance="mh"``."""
+
+    include_const: bool  # the fitness carries the normalising constant (as the NumPy fitness)
+    weighted_estimate: bool  # estimate="weighted": the weighted moments before resampling
+    resampler: int
 
 
 # ---------------------------------------------------------- Gaussian filters

@@ -22,12 +22,13 @@ import numpy as np
 
 from ..filters.base import CompiledPath
 from ..filters.cuckoo import mantegna_sigma
+from ..filters.cuckoo_mh import mh_layout, propagate_in_noise_space
 from ..filters.particle import ParticleState, propagate_particles, rows_rng
 from ..filters.workspace import memo, recycled, scratch
 from ..rng import RunStreams
 from . import pf_kernels as K
 from .common import R_MULTINOMIAL, R_RESIDUAL, R_STRATIFIED, R_SYSTEMATIC
-from .kernel_args import CuckooOptions, CuckooOutputs, Draws, Motion, PFOptions, PFOutputs, SearchArgs, Sensor
+from .kernel_args import CuckooOptions, CuckooOutputs, Draws, MHOptions, Motion, PFOptions, PFOutputs, SearchArgs, Sensor
 from .specs import MeasurementSpec, MotionSpec
 from .streams import stream_addresses
 
@@ -205,6 +206,9 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
     """One compiled CS-PF / ICS-PF step; same result layout as ``CuckooParticleFilter.step``."""
     from . import cuckoo_kernels as CK
 
+    if filt.acceptance == "mh":
+        return _mh_step(filt, specs, state, z, k, dt)
+
     ms, hs = specs
     search = filt.search
     batch, B = flat_batch(state.particles)
@@ -216,7 +220,7 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
     logw = np.ascontiguousarray(state.logw, dtype=float).reshape(B, N)
     zf = np.ascontiguousarray(z, dtype=float).reshape(B, m)
     valid = ~np.isnan(zf)
-    kk = 3 if search.step_scaling == "relative" else 2
+    kk = 3 if search.scaling == "relative" else 2
     n_norm = search.n_iter * kk * N * n
     n_unif = search.n_iter * (N * n + 1 + 2 * N)
     addrs, per_run = run_stream_addresses(rng, work)
@@ -228,13 +232,13 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
         uniforms = np.ascontiguousarray(rng.random((*batch, n_unif)).reshape(B, n_unif))
     else:
         normals, uniforms = np.empty((B, 0)), np.empty((B, 0))
-    sequential = filt.weight_mode == "sequential"
+    sequential = filt.mode == "sequential"
     # the NumPy fitness carries the normalising constant unless the stock all-measured fast path applies
     include_const = bool(hs.angle or not valid.all())
     alphas = np.array([search.alpha(t) for t in range(search.n_iter)] or [0.0])
     pas = np.array([search.pa(t) for t in range(search.n_iter)] or [0.0])
     trend = {"off": CK.TREND_OFF, "exp": CK.TREND_EXP, "linear": CK.TREND_LINEAR}[search.trend]
-    scaling = {"relative": CK.SCALE_RELATIVE, "absolute": CK.SCALE_ABSOLUTE, "std": CK.SCALE_STD}[search.step_scaling]
+    scaling = {"relative": CK.SCALE_RELATIVE, "absolute": CK.SCALE_ABSOLUTE, "std": CK.SCALE_STD}[search.scaling]
     lower = np.full(n, -np.inf) if search.lower is None else np.broadcast_to(np.asarray(search.lower, float), (n,)).copy()
     upper = np.full(n, np.inf) if search.upper is None else np.broadcast_to(np.asarray(search.upper, float), (n,)).copy()
     use_stop = search.f_stop is not None
@@ -269,6 +273,101 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
     new = ParticleState(
         Xout.reshape(*batch, N, n), logw_out.reshape(*batch, N), mean.reshape(*batch, n), cov.reshape(*batch, n, n),
         rng, k, uniform, work=work,
+    )
+    return new, info
+
+
+def _search_args(search, n: int) -> SearchArgs:
+    """The search's schedules and switches packed for the kernels."""
+    from . import cuckoo_kernels as CK
+
+    alphas = np.array([search.alpha(t) for t in range(search.n_iter)] or [0.0])
+    pas = np.array([search.pa(t) for t in range(search.n_iter)] or [0.0])
+    trend = {"off": CK.TREND_OFF, "exp": CK.TREND_EXP, "linear": CK.TREND_LINEAR}[search.trend]
+    scaling = {"relative": CK.SCALE_RELATIVE, "absolute": CK.SCALE_ABSOLUTE, "std": CK.SCALE_STD}[search.scaling]
+    lower = np.full(n, -np.inf) if search.lower is None else np.broadcast_to(np.asarray(search.lower, float), (n,)).copy()
+    upper = np.full(n, np.inf) if search.upper is None else np.broadcast_to(np.asarray(search.upper, float), (n,)).copy()
+    use_stop = search.f_stop is not None
+    log_stop = float(np.log(search.f_stop)) if use_stop else 0.0
+    return SearchArgs(
+        search.n_iter, alphas, pas, float(search.alpha_min), float(search.alpha_max), trend, float(search.kappa),
+        float(search.beta), mantegna_sigma(search.beta), scaling, search.discovery == "yang", log_stop, use_stop, lower, upper,
+    )
+
+
+def _mh_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: ParticleState, z: np.ndarray, k: int, dt):
+    """One compiled CS-PF / ICS-PF step with ``acceptance="mh"``; same result layout as the NumPy step.
+
+    ξ, m = f(x_{k−1}) and the propagated particles come from the NumPy code
+    (:func:`pursuit.filters.cuckoo_mh.propagate_in_noise_space`); the kernel
+    weighs, resamples and moves, drawing the resampler's uniforms and the
+    moves' numbers from each run's stream (or the caller draws them with
+    NumPy, in the NumPy filter's order, where the runs cannot draw themselves).
+    """
+    from . import cuckoo_kernels as CK
+
+    _, hs = specs
+    search = filt.search
+    batch, B = flat_batch(state.particles)
+    N, n = state.particles.shape[-2:]
+    m = hs.dim
+    work = state.work
+    rng = state.rng
+    Xp, Mp, XI, G = propagate_in_noise_space(filt.motion, state.particles, k, dt, rng)
+    r = G.shape[1]
+    Xp = np.ascontiguousarray(Xp, dtype=float).reshape(B, N, n)
+    Mp = np.ascontiguousarray(Mp, dtype=float).reshape(B, N, n)
+    XI = np.ascontiguousarray(XI, dtype=float).reshape(B, N, r)
+    logw = np.ascontiguousarray(state.logw, dtype=float).reshape(B, N)
+    zf = np.ascontiguousarray(z, dtype=float).reshape(B, m)
+    valid = ~np.isnan(zf)
+    rkind = RESAMPLER_CODES[filt.resampler]
+    nu = K.n_uniforms(rkind, N)
+    n_norm = search.n_iter * 2 * N * r
+    n_unif = search.n_iter * mh_layout(N, r)[-1]
+    addrs, per_run = run_stream_addresses(rng, work)
+    if per_run:
+        ures = scratch(work, "compiled.mh.resample", (B, nu))
+        normals = scratch(work, "compiled.mh.normals", (B, n_norm))
+        uniforms = scratch(work, "compiled.mh.uniforms", (B, n_unif))
+    else:  # the NumPy filter's draws, in its order: the resampler's (runs with a measurement), then the moves'
+        ures = np.zeros((B, nu))
+        rows = np.flatnonzero(valid.any(axis=1))
+        if rows.size:
+            ures[rows] = rows_rng(rng, rows).random((rows.size, nu))
+        if search.n_iter > 0:
+            normals = np.ascontiguousarray(rng.standard_normal((*batch, n_norm)).reshape(B, n_norm))
+            uniforms = np.ascontiguousarray(rng.random((*batch, n_unif)).reshape(B, n_unif))
+        else:
+            normals, uniforms = np.empty((B, 0)), np.empty((B, 0))
+    # the NumPy fitness carries the normalising constant unless the stock all-measured fast path applies
+    include_const = bool(hs.angle or not valid.all())
+    Xout = np.empty((B, N, n))
+    logw_out = np.empty((B, N))
+    mean, cov = np.empty((B, n)), np.empty((B, n, n))
+    innov, S = np.empty((B, m)), np.empty((B, m, m))
+    nis, loglik, ess, fbest = np.empty(B), np.empty(B), np.empty(B), np.empty(B)
+    dof = np.empty(B, dtype=np.int64)
+    iters, acc = np.empty(B, dtype=np.int64), np.empty(B, dtype=np.int64)
+    reset, need = np.empty(B, dtype=np.bool_), np.empty(B, dtype=np.bool_)
+    kernel = CK.mh_step_parallel if use_parallel(B) else CK.mh_step_serial
+    opts = MHOptions(include_const, filt.estimate == "weighted", rkind)
+    kernel(
+        (Xp, Mp, XI, logw), (ures, normals, uniforms), Draws(addrs, per_run), (zf, valid), G, measurement_args(hs),
+        _search_args(search, n), opts, PFOutputs(Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need),
+        (fbest, iters, acc),
+    )
+    h = N // 2
+    proposals = search.n_iter * (N + (h if N - h >= 2 else 0) + ((N - h) if h >= 2 else 0))
+    info = {
+        **_step_info(batch, m, innov, S, nis, dof, loglik, reset, ess, need),
+        "fitness_best": fbest.reshape(batch),
+        "iterations": iters.reshape(batch),
+        "acceptance": (acc / max(proposals, 1)).reshape(batch),
+    }
+    new = ParticleState(
+        Xout.reshape(*batch, N, n), logw_out.reshape(*batch, N), mean.reshape(*batch, n), cov.reshape(*batch, n, n),
+        rng, k, bool(need.all()), work=work,
     )
     return new, info
 

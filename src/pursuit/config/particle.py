@@ -97,16 +97,17 @@ def _upf(scenario, where="filter", **kw):
 _SEARCH_DOCS = {
     "n_iter": "cuckoo iterations per time step",
     "levy_beta": "Lévy stability index beta = lambda - 1, in (0, 2]",
-    "step_scaling": "Lévy step scaling",
+    "step_scaling": "Lévy step scaling (unset: relative for greedy acceptance; mh takes only absolute)",
     "discovery": "move entries with s > Pa (yang) or s < Pa",
-    "f_stop": "stop a run's iterations once its best fitness reaches this (0, 1]",
-    "lower": "per-dimension lower bounds applied after each move",
-    "upper": "per-dimension upper bounds applied after each move",
+    "f_stop": "greedy only: stop a run's iterations once its best fitness reaches this (0, 1]",
+    "lower": "greedy only: per-dimension lower bounds applied after each move",
+    "upper": "greedy only: per-dimension upper bounds applied after each move",
 }
 _FILTER_DOCS = {
-    "weight_mode": "weights after the moves",
-    "ess_threshold": "with weight_mode = 'sequential': resample when ESS < ess_threshold * N",
-    "estimate": "weighted mean or best nest",
+    "acceptance": "mh: resample-move with Metropolis-Hastings cuckoo moves that keep the posterior; greedy: the paper-literal search (can diverge)",
+    "weight_mode": "greedy only: weights after the moves (unset: reset)",
+    "ess_threshold": "greedy with weight_mode = 'sequential': resample when ESS < ess_threshold * N",
+    "estimate": "mean of the moved particles; weighted (mh): weighted mean before resampling; best (greedy): best nest",
 }
 
 
@@ -123,8 +124,8 @@ def _cuckoo_common(cls: type) -> tuple[Param, ...]:
         ),
         *params_from(
             cls,
-            ["weight_mode", "ess_threshold", "estimate"],
-            choices={"weight_mode": ("reset", "sequential"), "estimate": ("mean", "best")},
+            ["acceptance", "weight_mode", "ess_threshold", "estimate"],
+            choices={"acceptance": ("mh", "greedy"), "weight_mode": ("reset", "sequential"), "estimate": ("mean", "weighted", "best")},
             docs=_FILTER_DOCS,
         ),
         *params_from(cls, ["resampler"], choices={"resampler": tuple(RESAMPLERS)}, docs={"resampler": _RESAMPLER_DOC}),
@@ -149,7 +150,7 @@ def _cuckoo_filter(cls, scenario, where: str, search_kw: dict[str, Any], kw: dic
 @register(
     "filter",
     "cs-pf",
-    "Cuckoo-search particle filter (CS-PF): particles moved by Lévy flights with a fixed step size and discovery probability",
+    "Cuckoo-search particle filter (CS-PF): Metropolis-Hastings moves by Lévy flights and discovery with a fixed step size and discovery probability (acceptance = \"greedy\": the paper-literal search)",
     params=(
         NAME,
         field_param(CSPF, "particles", doc=_PARTICLES_DOC),
@@ -171,7 +172,7 @@ _ICS_KEYS = ("alpha_max", "alpha_min", "pa_max", "pa_min", "pa_schedule", "trend
 @register(
     "filter",
     "ics-pf",
-    "Improved cuckoo-search particle filter (Wei & Guo, \"WSN target tracking based on improved cuckoo particle filter algorithm\"): shrinking step size and Pa, fitness-trend step",
+    "Improved cuckoo-search particle filter (Wei & Guo, \"WSN target tracking based on improved cuckoo particle filter algorithm\"): shrinking step size and Pa, fitness-trend step; Metropolis-Hastings moves (acceptance = \"greedy\": the paper-literal search)",
     params=(
         NAME,
         field_param(ICSPF, "particles", doc=_PARTICLES_DOC),

@@ -43,6 +43,11 @@ particle at once (Lévy u, v and ξ normals, ``(n_iter, 3, N, n)``; uniforms ``(
 with them, measured peak / estimate is 0.76 (n_iter 0) to 1.05 (n_iter 10) and 1.01 (n_iter 40).
 Without them, ``n_iter = 10**7`` ended in a 671 GiB ``MemoryError``."""
 
+MH_DRAWS_PER_ITERATION = (3, 3)
+"""The same for the MH cuckoo moves (``acceptance="mh"``): ``a·r + b`` numbers per particle and
+iteration, r the dimension of the process noise (Lévy u, v normals ``(n_iter, 2, N, r)``; uniforms
+``(n_iter, N (r + 3) + 2)``), with room for the moves' per-half temporaries."""
+
 
 class MemoryNeeded(ValueError):
     """A comparison that cannot fit in memory; the message starts with the setting to change.
@@ -131,6 +136,16 @@ def _particles(filt: Any) -> int | None:
     return p if isinstance(p, int) and not isinstance(p, bool) and p > 0 else None
 
 
+def _noise_dim(motion: Any, n: int) -> int:
+    """Columns r of the motion model's noise factor (n where it cannot be asked without a step)."""
+    from ..filters.cuckoo_mh import noise_factor
+
+    try:
+        return int(noise_factor(motion, 1, None).shape[1])
+    except Exception:  # noqa: BLE001 - an estimate: the state dimension bounds r
+        return n
+
+
 def _work_floats_per_run(filt: Any, n: int, m: int) -> int:
     """Floats one filter step holds per run at its peak (see :data:`WORK_COPIES`)."""
     from ..filters.cuckoo import CuckooParticleFilter
@@ -143,7 +158,11 @@ def _work_floats_per_run(filt: Any, n: int, m: int) -> int:
     floats = WORK_COPIES * particles * per_particle
     if isinstance(filt, CuckooParticleFilter):
         a, b = CUCKOO_DRAWS_PER_ITERATION
-        floats += int(filt.search.n_iter) * particles * (a * n + b)
+        dim = n
+        if filt.acceptance == "mh":
+            a, b = MH_DRAWS_PER_ITERATION
+            dim = _noise_dim(filt.motion, n)
+        floats += int(filt.search.n_iter) * particles * (a * dim + b)
     return floats
 
 

@@ -71,6 +71,7 @@ import numpy as np
 
 from .._validation import in_range, nonnegative, positive, time_step
 from ..rng import RunStreams
+from .cuckoo_mh import mh_moves, propagate_in_noise_space
 from .particle import (
     ParticleFilterBase,
     ParticleState,
@@ -143,7 +144,9 @@ class CuckooSearch:
     beta
         Lévy stability index β = λ − 1 ∈ (0, 2] (default 1.5).
     step_scaling
-        ``"relative"`` (Yang), ``"absolute"`` (literal eq. 5) or ``"std"``.
+        ``"relative"`` (Yang), ``"absolute"`` (literal eq. 5) or ``"std"``;
+        None (default): ``"relative"`` for the greedy search, the only
+        choice ``"absolute"`` (in noise space) for ``acceptance="mh"``.
     discovery
         ``"yang"`` (move entries with s > Pa) or ``"literal_pa"`` (s < Pa).
     f_stop
@@ -162,7 +165,7 @@ class CuckooSearch:
     trend: str = "exp"
     kappa: float = 1.0
     beta: float = 1.5
-    step_scaling: str = "relative"
+    step_scaling: str | None = None
     discovery: str = "yang"
     f_stop: float | None = None
     lower: Any = None
@@ -182,7 +185,8 @@ class CuckooSearch:
             raise ValueError(f"pa_min: must not exceed pa_max ({pmin} > {pmax})")
         _choice("pa_schedule", self.pa_schedule, ("sine", "linear", "cosine", "constant"))
         _choice("trend", self.trend, ("exp", "linear", "off"))
-        _choice("step_scaling", self.step_scaling, ("relative", "absolute", "std"))
+        if self.step_scaling is not None:
+            _choice("step_scaling", self.step_scaling, ("relative", "absolute", "std"))
         _choice("discovery", self.discovery, ("yang", "literal_pa"))
         nonnegative("kappa", self.kappa)
         mantegna_sigma(self.beta)
@@ -198,6 +202,11 @@ class CuckooSearch:
                 object.__setattr__(self, name, arr)
         if self.lower is not None and self.upper is not None and np.any(self.lower > self.upper):
             raise ValueError("lower: every lower bound must not exceed its upper bound")
+
+    @property
+    def scaling(self) -> str:
+        """The greedy search's Lévy step scaling (``step_scaling``, ``"relative"`` when None)."""
+        return "relative" if self.step_scaling is None else self.step_scaling
 
     # -- schedules -------------------------------------------------------------
     def _frac(self, t: int) -> float:
@@ -230,7 +239,7 @@ class CuckooSearch:
         discovery s, the scalar r and the keys of the two permutations).
         """
         *batch, N, n = shape
-        k = 3 if self.step_scaling == "relative" else 2
+        k = 3 if self.scaling == "relative" else 2
         normals = rng.standard_normal((*batch, self.n_iter, k, N, n))
         uniforms = rng.random((*batch, self.n_iter, N * n + 1 + 2 * N))
         return normals, uniforms
@@ -305,12 +314,12 @@ class CuckooSearch:
                 alpha = np.clip(a_t * factor, self.alpha_min, self.alpha_max)[..., None]
         # 1. Lévy flight
         step = _mantegna(normals[..., 0, :, :], normals[..., 1, :, :], self.beta)
-        if self.step_scaling == "relative":
+        if self.scaling == "relative":
             best = np.argmax(F, axis=-1)
             X_best = np.take_along_axis(X, best[..., None, None], axis=-2)
             step *= X - X_best
             step *= normals[..., 2, :, :]
-        elif self.step_scaling == "std":
+        elif self.scaling == "std":
             step *= X.std(axis=-2, keepdims=True)
         step *= alpha
         X, F, acc = self._greedy(X, F, X + step, fit, active, trace)
@@ -372,7 +381,7 @@ _ICS_SEARCH = CuckooSearch()
 
 @dataclass(frozen=True)
 class CuckooParticleFilter(ParticleFilterBase):
-    """A particle filter whose resampling is replaced by a cuckoo search (paper P1).
+    """A particle filter with cuckoo-search moves (paper P1).
 
     Parameters
     ----------
@@ -380,28 +389,40 @@ class CuckooParticleFilter(ParticleFilterBase):
         See :class:`pursuit.filters.particle.ParticleFilterBase`.
     ess_threshold
         Resample when ESS < ``ess_threshold``·N (None: every step); used
-        only with ``weight_mode="sequential"`` (default 0.5).
+        only with ``acceptance="greedy"`` and ``weight_mode="sequential"``
+        (default 0.5).
     search
         The :class:`CuckooSearch` settings (iterations, schedules, moves).
+    acceptance
+        ``"mh"`` (default): resample-move with Metropolis–Hastings cuckoo
+        moves that keep the posterior (:mod:`pursuit.filters.cuckoo_mh`);
+        ``"greedy"``: the paper-literal search, greedy moves on the
+        propagated particles weighted by the likelihood alone (module
+        docstring; it can diverge).
     weight_mode
-        ``"reset"`` (default): weights are the likelihood of the moved
-        particles, no resampling; ``"sequential"``: previous weights times
-        the likelihood, resampling on low ESS.
+        Greedy only.  ``"reset"`` (the greedy default, None): weights are
+        the likelihood of the moved particles, no resampling;
+        ``"sequential"``: previous weights times the likelihood, resampling
+        on low ESS.  Must be None with ``acceptance="mh"``.
     estimate
-        ``"mean"`` (default): weighted mean and covariance;
-        ``"best"``: the best nest, with the weighted second moment about it
-        as covariance.
+        ``"mean"`` (default): mean and covariance of the (weighted) moved
+        particles; ``"best"`` (greedy only): the best nest, with the weighted
+        second moment about it as covariance; ``"weighted"`` (mh only): the
+        weighted mean and covariance before resampling and moving.
 
     Notes
     -----
     Step info adds ``fitness_best`` (the best nest's fitness), ``iterations``
     (cuckoo iterations run) and ``acceptance`` (share of accepted moves).
-    ``weights_reset`` refers to the final (post-move) weights.
+    With greedy acceptance ``weights_reset`` refers to the final (post-move)
+    weights; with MH acceptance ``ess`` and ``weights_reset`` are those of
+    the weights before resampling.
     """
 
     ess_threshold: float | None = 0.5
     search: CuckooSearch = _ICS_SEARCH
-    weight_mode: str = "reset"
+    acceptance: str = "mh"
+    weight_mode: str | None = None
     estimate: str = "mean"
 
     compiled_path = "particle:CUCKOO"
@@ -410,11 +431,43 @@ class CuckooParticleFilter(ParticleFilterBase):
         super().__post_init__()
         if not isinstance(self.search, CuckooSearch):
             raise TypeError(f"search: expected a CuckooSearch, got {type(self.search).__name__}")
-        _choice("weight_mode", self.weight_mode, ("reset", "sequential"))
-        _choice("estimate", self.estimate, ("mean", "best"))
+        _choice("acceptance", self.acceptance, ("mh", "greedy"))
+        if self.acceptance == "greedy":
+            if self.weight_mode is not None:
+                _choice("weight_mode", self.weight_mode, ("reset", "sequential"))
+            _choice("estimate", self.estimate, ("mean", "best"))
+            return
+        _choice("estimate", self.estimate, ("mean", "weighted"))
+        search = self.search
+        bad = [
+            ("weight_mode", self.weight_mode is not None, "the weights are uniform after the moves"),
+            ("step_scaling", search.step_scaling not in (None, "absolute"), "only the absolute Lévy step in noise space is symmetric"),
+            ("f_stop", search.f_stop is not None, "a stopping rule on the fitness breaks the move's invariance"),
+            ("lower", search.lower is not None, "a box in state space breaks the move's invariance"),
+            ("upper", search.upper is not None, "a box in state space breaks the move's invariance"),
+        ]
+        for field_name, is_set, why in bad:
+            if is_set:
+                raise ValueError(f'{field_name}: not used with acceptance="mh" ({why}); leave it unset or use acceptance="greedy"')
+        motion = self.motion
+        if not (callable(getattr(motion, "f", None)) and (hasattr(motion, "noise_factor") or callable(getattr(motion, "cov", None)))):
+            raise ValueError(
+                f'motion: acceptance="mh" needs an additive Gaussian motion model with f and cov (or noise_factor); '
+                f'{type(motion).__name__} has not; use acceptance="greedy"'
+            )
+        if getattr(motion, "additive_gaussian", True) is False:
+            raise ValueError(
+                f'motion: acceptance="mh" needs an additive Gaussian motion model x = f(x) + G xi; '
+                f'{type(motion).__name__} is not; use acceptance="greedy"'
+            )
+
+    @property
+    def mode(self) -> str:
+        """The greedy weight mode (``weight_mode``, ``"reset"`` when None)."""
+        return "reset" if self.weight_mode is None else self.weight_mode
 
     def _compiled_unsupported(self) -> str | None:
-        if self.search.step_scaling == "std":
+        if self.acceptance == "greedy" and self.search.step_scaling == "std":
             # the nests' spread is a NumPy pairwise sum; the search amplifies any rounding difference
             return "step_scaling='std'"
         return None
@@ -427,17 +480,51 @@ class CuckooParticleFilter(ParticleFilterBase):
     def step(
         self, state: ParticleState, z: np.ndarray, k: int | None = None, dt: float | None = None
     ) -> tuple[ParticleState, dict[str, np.ndarray]]:
-        """Propagate, run the cuckoo search, weigh and estimate."""
+        """Propagate, weigh, move and estimate (``acceptance`` says in which order)."""
         k = state.k + 1 if k is None else int(k)
         dt = time_step(dt, k)
         z = _prepare_measurement(z, state.batch, k, self.measurement)
         if self._compiled_batch(state):
             return self._compiled_step(state, z, k, dt)
+        if self.acceptance == "mh":
+            return self._mh_step(state, z, k, dt)
+        return self._greedy_step(state, z, k, dt)
+
+    def _mh_step(self, state: ParticleState, z: np.ndarray, k: int, dt: float | None):
+        """Resample-move with MH cuckoo moves (:mod:`pursuit.filters.cuckoo_mh`)."""
+        rng = state.rng
+        work = state.work
+        N = self.particles
+        X, m, xi, G = propagate_in_noise_space(self.motion, state.particles, k, dt, rng)
+        # exactly the bootstrap PF's measurement step, estimate and resampling (ess_threshold=None)
+        weighed = self.weigh(X, z, k, None if state.uniform else state.logw, work=work)
+        if self.estimate == "weighted":
+            mean, cov = weighted_moments(X, weighed.e, weighed.s, work)
+        ess = weighed.ess
+        need = weighed.measured.copy()
+        e_after = np.where(need[..., None], 1.0, weighed.e)
+        s_after = np.where(need, float(N), weighed.s)
+        info = weighed.info
+        (X, m, xi), logw, uniform = self.resample([X, m, xi], weighed, need, rng, work)
+        X, xi, F, accepted, proposals = mh_moves(
+            self.search, mantegna_sigma(self.search.beta), X, m, xi, G, lambda C: self._fitness(C, z, k), rng
+        )
+        if self.estimate == "mean":
+            mean, cov = weighted_moments(X, e_after, s_after, work)
+        info["ess"] = ess
+        info["resampled"] = need
+        info["fitness_best"] = F.max(axis=-1)
+        info["iterations"] = np.full(state.batch, self.search.n_iter, dtype=int)
+        info["acceptance"] = accepted / max(proposals, 1)
+        return ParticleState(X, logw, mean, cov, rng, k, uniform, work=work), info
+
+    def _greedy_step(self, state: ParticleState, z: np.ndarray, k: int, dt: float | None):
+        """The paper-literal step: propagate, greedy search, weigh by the likelihood alone."""
         rng = state.rng
         work = state.work
         N = self.particles
         X = propagate_particles(self.motion, state.particles, k, dt, rng)
-        sequential = self.weight_mode == "sequential"
+        sequential = self.mode == "sequential"
         log_prior = state.logw if sequential and not state.uniform else None
         # predictive statistics and likelihood increment from the propagated particles
         weighed = self.weigh(X, z, k, log_prior, work=work)

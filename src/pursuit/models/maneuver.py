@@ -416,6 +416,9 @@ class CurrentStatistical(_ChainAxes):
     :mod:`pursuit.filters.cs` compute their own Q.
     """
 
+    # the noise covariance depends on the state: no fixed factor G (the MH cuckoo moves check this)
+    additive_gaussian = False
+
     a_max: float = 100.0
     a_neg_max: float | None = None
     sigma: float = field(init=False, default=0.0)
