@@ -271,8 +271,8 @@ def test_user_models_fall_back_with_a_warning():
     assert pf.backend == "numba" and not pf.compiled
     with pytest.warns(CompiledBackendWarning, match="fading strategy StrongTracking"):
         assert not pu.ExtendedKalmanFilter(ConstantVelocity(), meas, fading=pu.StrongTracking(), backend="numba").compiled
-    with pytest.warns(CompiledBackendWarning, match="PartialUPF"):
-        pu.PartialUPF(ConstantVelocity(), meas, particles=20, backend="numba")
+    with pytest.warns(CompiledBackendWarning, match="JitteredMotion"):  # the UPF's replacement of a singular Q
+        pu.PartialUPF(ConstantVelocity(), meas, particles=20, singular_noise="jitter", backend="numba")
     with pytest.warns(CompiledBackendWarning, match="step_scaling='std'"):
         pu.ICSPF(ConstantVelocity(), meas, particles=20, search=CuckooSearch(step_scaling="std"), backend="numba")
     with warnings.catch_warnings():
