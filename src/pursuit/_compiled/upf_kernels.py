@@ -52,7 +52,7 @@ _NJ = dict(cache=True, error_model="numpy")
 _JITTER = 1e-9  # the population covariance's and "zero" mode's 1e-9·I
 
 
-@njit(**_NJ)
+@njit(cache=True, error_model="numpy", inline="always")
 def cholesky_psd_inplace(P, L):
     """Lower Cholesky factor of ½(P + Pᵀ) into ``L``, as :func:`pursuit._linalg.cholesky_psd`; True if repaired.
 
@@ -66,8 +66,38 @@ def cholesky_psd_inplace(P, L):
             v = 0.5 * (P[a, b] + P[b, a])
             P[a, b] = v
             P[b, a] = v
-    if cholesky_inplace(P, L):
+    if _cholesky(P, L):
         return False
+    return _repair(P, L)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _cholesky(S, L):
+    """:func:`.common.cholesky_inplace`, inlined into the particle loop."""
+    m = S.shape[0]
+    for j in range(m):
+        for i in range(j):
+            L[i, j] = 0.0
+    for j in range(m):
+        acc = S[j, j]
+        for p in range(j):
+            acc -= L[j, p] * L[j, p]
+        if not (acc > 0.0) or not math.isfinite(acc):
+            return False
+        d = math.sqrt(acc)
+        L[j, j] = d
+        for i in range(j + 1, m):
+            acc = S[i, j]
+            for p in range(j):
+                acc -= L[i, p] * L[j, p]
+            L[i, j] = acc / d
+    return True
+
+
+@njit(**_NJ)
+def _repair(P, L):
+    """Factor of P with its eigenvalues clipped (the rare path of :func:`cholesky_psd_inplace`); True."""
+    n = P.shape[0]
     if not np.all(np.isfinite(P)):
         for a in range(n):
             for b in range(n):
@@ -112,49 +142,72 @@ def ukf_scratch(n, m, q):
         np.empty((n, n)),  # 13 A_L
         np.zeros(p * q),  # 14 zero noise: f(χ) through the motion's propagation
         np.empty((m, m)),  # 15 Pzz
+        np.empty((m, n)),  # 16 K chol R, transposed
     )
 
 
-@njit(**_NJ)
+@njit(cache=True, error_model="numpy", inline="always")
 def _residual_comp(angle, j, a):
     return wrap(a) if (angle and j == 1) else a
 
 
-@njit(**_NJ)
+@njit(cache=True, error_model="numpy", inline="always")
 def ukf_one(x, P, z, valid, mk, F, G, par, hk, A, idx, hscale, angle, R, upf, ws, mean, cov):
     """One UKF step from (x, P) with measurement z into (mean, cov) (``P`` is overwritten)."""
-    chi, Y, Z, E, L, Pp, xp, K, S, LS, Gm, nu, zp, AL, zero, Pzz = ws
+    chi, Y, Z, E, L, Pp, xp, K, S, LS, Gm, nu, zp, AL, zero, Pzz, KC = ws
     n = x.shape[0]
     m = z.shape[0]
     p = 2 * n + 1
     c = upf.cscale
     wm, wc = upf.wm, upf.wc
-    # -- predict: points of (x, P) through f
-    cholesky_psd_inplace(P, L)
-    for a in range(n):
-        chi[0, a] = x[a]
-    for j in range(n):
+    # -- predict
+    if mk == LINEAR:
+        # f = F x: the points' mean and spread are exactly F x and F P Fᵀ (Σ wm = 1, Σ wc ξ ξᵀ = I),
+        # so skip the factor and the 2n + 1 propagations (the same numbers up to rounding)
         for a in range(n):
-            d = c * L[a, j]
-            chi[1 + j, a] = x[a] + d
-            chi[1 + n + j, a] = x[a] - d
-    for i in range(p):
-        propagate_point(mk, F, G, par, chi, i, zero, Y, i)
-    for a in range(n):
-        acc = 0.0
+            acc = 0.0
+            for j in range(n):
+                acc += F[a, j] * x[j]
+            xp[a] = acc
+        for a in range(n):  # L = P Fᵀ (scratch), P symmetrised as the points' factor would see it
+            for b in range(n):
+                acc = 0.0
+                for j in range(n):
+                    acc += 0.5 * (P[a, j] + P[j, a]) * F[b, j]
+                L[a, b] = acc
+        for a in range(n):
+            for b in range(a, n):
+                acc = 0.0
+                for j in range(n):
+                    acc += F[a, j] * L[j, b]
+                Pp[a, b] = acc
+                Pp[b, a] = acc
+    else:  # the points of (x, P) through f
+        cholesky_psd_inplace(P, L)
+        for a in range(n):
+            chi[0, a] = x[a]
+        for j in range(n):
+            for a in range(n):
+                d = c * L[a, j]
+                chi[1 + j, a] = x[a] + d
+                chi[1 + n + j, a] = x[a] - d
         for i in range(p):
-            acc += wm[i] * Y[i, a]
-        xp[a] = acc
-    for i in range(p):
+            propagate_point(mk, F, G, par, chi, i, zero, Y, i)
         for a in range(n):
-            Y[i, a] -= xp[a]
-    for a in range(n):
-        for b in range(a, n):
             acc = 0.0
             for i in range(p):
-                acc += Y[i, a] * wc[i] * Y[i, b]
-            Pp[a, b] = acc
-            Pp[b, a] = acc
+                acc += wm[i] * Y[i, a]
+            xp[a] = acc
+        for i in range(p):
+            for a in range(n):
+                Y[i, a] -= xp[a]
+        for a in range(n):
+            for b in range(a, n):
+                acc = 0.0
+                for i in range(p):
+                    acc += Y[i, a] * wc[i] * Y[i, b]
+                Pp[a, b] = acc
+                Pp[b, a] = acc
     for a in range(n):
         for b in range(n):
             Pp[a, b] += upf.Q[a, b]
@@ -261,27 +314,31 @@ def ukf_one(x, P, z, valid, mk, F, G, par, hk, A, idx, hscale, angle, R, upf, ws
             for j in range(m):
                 acc += K[a, j] * Gm[b, j]
             AL[a, b] = L[a, b] - acc
-    if upf.gram:  # W Wᵀ with W = [A_L, K chol R, K Eᵀ diag √wc]
+    if upf.gram:  # W Wᵀ with W = [A_L, K chol R, K Eᵀ diag √wc]; the last two blocks transposed in KC and W
         Rc = upf.R_chol
+        W = chi  # (p, n) scratch: the points are no longer needed
+        for i in range(p):  # KE[i, a] = √wc_i Σ_q K[a, q] E[i, q]
+            sw = math.sqrt(wc[i])
+            for a in range(n):
+                acc = 0.0
+                for q_ in range(m):
+                    acc += K[a, q_] * E[i, q_]
+                W[i, a] = sw * acc
+        for j in range(m):  # KC[j, a] = Σ_q K[a, q] Rc[q, j]
+            for a in range(n):
+                acc = 0.0
+                for q_ in range(m):
+                    acc += K[a, q_] * Rc[q_, j]
+                KC[j, a] = acc
         for a in range(n):
             for b in range(a, n):
                 acc = 0.0
                 for j in range(n):
                     acc += AL[a, j] * AL[b, j]
                 for j in range(m):
-                    ka = 0.0
-                    kb = 0.0
-                    for q in range(m):
-                        ka += K[a, q] * Rc[q, j]
-                        kb += K[b, q] * Rc[q, j]
-                    acc += ka * kb
+                    acc += KC[j, a] * KC[j, b]
                 for i in range(p):
-                    ka = 0.0
-                    kb = 0.0
-                    for q in range(m):
-                        ka += K[a, q] * E[i, q]
-                        kb += K[b, q] * E[i, q]
-                    acc += wc[i] * (ka * kb)
+                    acc += W[i, a] * W[i, b]
                 cov[a, b] = acc
                 cov[b, a] = acc
     else:  # A_L A_Lᵀ + K (R_eff + D) Kᵀ
