@@ -69,3 +69,16 @@ def test_long_run_script_takes_fading_variants_and_a_step_count():
         assert "repaired=0" in line and "cholesky_failures=0" in line and "all_finite=True" in line
     bad = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "long_run.py"), "ekf+xyz"], capture_output=True, text=True, timeout=60)
     assert bad.returncode != 0 and "unknown name 'ekf+xyz'" in bad.stderr
+
+
+def test_upf_benchmark_quick_mode():
+    pytest.importorskip("numba")
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "run.py"), "--quick", "--only", "upf"],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert proc.returncode == 0, proc.stderr
+    for row in ("| bootstrap PF | numpy |", "| UPF l = 1 | numpy |", "| bootstrap PF | numba |", "| UPF l = 0.1 | numba |"):
+        assert row in proc.stdout

@@ -195,5 +195,7 @@ if importlib.util.find_spec("numba") is not None:
             **_PF,
         ),
         Case("cs-pf-numba", lambda s: CSPF(s.motion, s.measurement, particles=100, search=CuckooSearch(n_iter=3, trend="off"), **_NB), **_PF),
+        Case("upf-l0.5-numba", lambda s: PartialUPF(s.motion, s.measurement, particles=100, fraction=0.5, **_NB), **_PF),
+        Case("upf-l1-numba", lambda s: PartialUPF(s.motion, s.measurement, particles=50, fraction=1.0, **_NB), **_PF),
     ]
     NONLINEAR_CASES = [c for c in CASES if c.id != "kf" and not c.id.startswith("kf-") and c.scenario is None]

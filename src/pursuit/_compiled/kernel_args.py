@@ -29,6 +29,8 @@ __all__ = [
     "CuckooOptions",
     "CuckooOutputs",
     "MHOptions",
+    "UPFArgs",
+    "UPFOutputs",
     "SigmaPoints",
     "GaussOutputs",
     "GaussSequenceOutputs",
@@ -152,6 +154,29 @@ class MHOptions(NamedTuple):
     include_const: bool  # the fitness carries the normalising constant (as the NumPy fitness)
     weighted_estimate: bool  # estimate="weighted": the weighted moments before resampling
     resampler: int
+class UPFArgs(NamedTuple):
+    """The partial UPF's step (:mod:`.upf_kernels`): the UKF group, the unscented transform and the transition density."""
+
+    n_u: int  # particles with a UKF proposal
+    select: int  # SELECT_* code of upf_kernels
+    uniform: bool  # every previous weight is exactly 1/N (the state's flag)
+    cov_mode: int  # COV_* code of upf_kernels
+    cscale: float  # sigma points x ± cscale · columns of chol P, the centre first
+    wm: np.ndarray  # (2n + 1,)
+    wc: np.ndarray  # (2n + 1,)
+    Q: np.ndarray  # (n, n) process noise of the filter's full-rank model
+    Q_inv_chol: np.ndarray  # (n, n) inverse of chol Q (the transition density)
+    Q_logdiag: float  # Σ log diag chol Q
+    R_chol: np.ndarray  # (m, m) chol R, for the Gram form of the Joseph update
+    gram: bool  # whether the Gram form applies (wc ≥ 0 and R factors)
+    P0: np.ndarray  # (B, n, n) the prior covariance of each run (cov_mode "reset")
+
+
+class UPFOutputs(NamedTuple):
+    """What a partial-UPF step writes besides its :class:`PFOutputs`: the per-particle covariances and the repair flags."""
+
+    particle_cov: np.ndarray  # (B, N, n·n)
+    repaired: np.ndarray  # (B,) bool
 
 
 # ---------------------------------------------------------- Gaussian filters

@@ -54,6 +54,7 @@ import numpy as np
 
 from .._linalg import cholesky_psd, mv
 from .._validation import in_range, nonnegative, time_step
+from ..compute import compiled_specs
 from ..rng import RNGLike
 from .gaussian import GaussianState, UnscentedKalmanFilter
 from .jacobians import motion_jacobian
@@ -166,6 +167,8 @@ class PartialUPF(ParticleFilterBase):
     _model: Any = field(init=False, repr=False, compare=False, default=None)
     _ukf: Any = field(init=False, repr=False, compare=False, default=None)
 
+    compiled_path = "upf:UPF"
+
     def __post_init__(self) -> None:
         super().__post_init__()
         object.__setattr__(self, "fraction", in_range("fraction", self.fraction, 0.0, 1.0))
@@ -188,10 +191,29 @@ class PartialUPF(ParticleFilterBase):
     def _default_name(self) -> str:
         return f"UPF(l={self.fraction:g})"
 
+    def _compiled_unsupported(self) -> str | None:
+        """The compiled step runs the full-rank model the filter uses; ``"propagate"`` needs it linear."""
+        model = full_rank_motion(self.motion, self.singular_noise, self.jitter)
+        specs = compiled_specs(model, self.measurement, need_diagonal=self.need_diagonal_noise)
+        if isinstance(specs, str):
+            if model is not self.motion:
+                return f"{specs}: the singular process noise of {type(self.motion).__name__} is replaced by that model (singular_noise={self.singular_noise!r})"
+            return specs
+        if self.cov_mode == "propagate" and isinstance(
+            compiled_specs(model, self.measurement, need_diagonal=self.need_diagonal_noise, linear_motion=True), str
+        ):
+            return f"cov_mode='propagate' with the nonlinear motion model {type(model).__name__} (the compiled step propagates covariances with a constant F)"
+        return None
+
     @property
     def model(self) -> Any:
         """The motion model the filter actually uses (full-rank process noise)."""
         return self._model
+
+    @property
+    def ukf(self) -> UnscentedKalmanFilter:
+        """The unscented Kalman filter that makes the proposals (its ``sigma_weights``; the model is :attr:`model`)."""
+        return self._ukf
 
     @property
     def n_ukf(self) -> int:
@@ -217,8 +239,20 @@ class PartialUPF(ParticleFilterBase):
         """Select, propose (UKF or prior), weigh, estimate and maybe resample."""
         k = state.k + 1 if k is None else int(k)
         dt = time_step(dt, k)
+        z = _prepare_measurement(z, state.batch, k, self.measurement)
+        if self._compiled_batch(state):
+            return self._compiled_step(state, z, k, dt)
+        return self.numpy_step(state, z, k, dt)
+
+    def numpy_step(
+        self, state: ParticleState, z: np.ndarray, k: int, dt: float | None
+    ) -> tuple[ParticleState, dict[str, np.ndarray]]:
+        """The NumPy step, whatever the backend (``z`` already checked and broadcast to ``(*batch, m)``).
+
+        :meth:`step` calls it unless the step runs compiled; the compiled
+        step calls it where the runs do not draw from streams of their own.
+        """
         batch = state.batch
-        z = _prepare_measurement(z, batch, k, self.measurement)
         rng = state.rng
         work = state.work
         N = self.particles
