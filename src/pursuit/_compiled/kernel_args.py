@@ -154,6 +154,8 @@ class MHOptions(NamedTuple):
     include_const: bool  # the fitness carries the normalising constant (as the NumPy fitness)
     weighted_estimate: bool  # estimate="weighted": the weighted moments before resampling
     resampler: int
+
+
 class UPFArgs(NamedTuple):
     """The partial UPF's step (:mod:`.upf_kernels`): the UKF group, the unscented transform and the transition density."""
 
