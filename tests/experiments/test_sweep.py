@@ -259,6 +259,9 @@ def test_order_verdict_follows_the_intervals():
     from pursuit.experiments.sweep import order_verdict
 
     holds = [("N = 30", "ICS-PF", "CS-PF", -0.5, 0.2), ("N = 30", "CS-PF", "PF", -0.3, 0.25)]
+    # a diverged filter's non-finite differences fail every comparison: never "reproduced"
+    for bad in ((-1.0, float("nan")), (float("nan"), float("nan")), (float("-inf"), 0.1)):
+        assert order_verdict(holds + [("N = 60", "ICS-PF", "CS-PF", *bad)])[0] == "not shown"
     assert order_verdict(holds) == ("reproduced", "weakest: CS-PF \u2212 PF = \u22120.3 [\u22120.55, \u22120.05] at N = 30")
     fails = holds + [("N = 100", "CS-PF", "PF", 0.4, 0.2), ("N = 60", "CS-PF", "PF", 0.3, 0.1)]
     assert order_verdict(fails) == ("not reproduced", "CS-PF \u2212 PF = +0.4 [0.2, 0.6] at N = 100")
@@ -288,6 +291,7 @@ def test_value_verdict_follows_the_numbers():
         (('order = ["ICS-PF", "PF"]', 'order = ["ICS-PF", "PF"]\nfilter = "PF"'), "claim[0]: give either order"),
         (('variant = "Q = 1"\norder', 'variant = "Q = 3"\norder'), "claim[0].variant: expected one of the variants"),
         (("at = 40\n\n[[claim]]", "at = 30\n\n[[claim]]"), "claim[1].at: 30 is not a swept value"),
+        (("at = 40\n\n[[claim]]", "\n[[claim]]"), "claim[1].at: required, PF is run at every swept value"),
         (("filter = \"PF\"\nat = 40", "filter = \"PF\"\nat = 20"), "claim[1].value: required (no [[paper]] entry"),
         (('at = 40\n\n[[claim]]', 'at = 40\nmetric = "nis_mean"\n\n[[claim]]'), "claim[1].metric: no error column 'nis_mean'"),
         (("runs_factor = 2", "runs_factor = 0"), "limit.runs_factor: must be at least 1"),

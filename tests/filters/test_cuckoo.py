@@ -381,6 +381,7 @@ def test_mh_cuckoo_filters_are_never_worse_than_the_bootstrap_pf(scenario, margi
     [
         (dict(weight_mode="sequential"), "weight_mode"),
         (dict(weight_mode="reset"), "weight_mode"),
+        (dict(ess_threshold=0.5), "ess_threshold"),
         (dict(estimate="best"), "estimate"),
         (dict(search=CuckooSearch(step_scaling="relative")), "step_scaling"),
         (dict(search=CuckooSearch(step_scaling="std")), "step_scaling"),
@@ -397,6 +398,9 @@ def test_mh_rejects_options_it_cannot_honour(kw, field):
     ICSPF(sc.motion, sc.measurement, search=CuckooSearch(step_scaling="absolute"))  # the Lévy step MH uses
     with pytest.raises(ValueError, match="estimate"):
         ICSPF(sc.motion, sc.measurement, acceptance="greedy", estimate="weighted")
+    # greedy sequential reads an unset ess_threshold as 0.5, as before
+    assert ICSPF(sc.motion, sc.measurement, acceptance="greedy").greedy_ess_threshold == 0.5
+    assert ICSPF(sc.motion, sc.measurement, acceptance="greedy", ess_threshold=0.8).greedy_ess_threshold == 0.8
 
 
 def test_mh_needs_an_additive_gaussian_motion_model():

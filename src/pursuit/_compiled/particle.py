@@ -244,7 +244,7 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
     use_stop = search.f_stop is not None
     log_stop = float(np.log(search.f_stop)) if use_stop else 0.0
     rkind = RESAMPLER_CODES[filt.resampler]
-    thr = -1.0 if filt.ess_threshold is None else float(filt.ess_threshold)
+    thr = filt.greedy_ess_threshold
     Xout = np.empty((B, N, n))
     logw_out = np.empty((B, N))
     mean, cov = np.empty((B, n)), np.empty((B, n, n))

@@ -212,7 +212,8 @@ def order_verdict(diffs: list[tuple[str, str, str, float, float]]) -> tuple[str,
         ``"reproduced"`` when every interval lies below 0 (``because``: the
         weakest of them); ``"not reproduced"`` when some interval lies above 0
         (the largest such difference); else ``"not shown"`` (an interval
-        holds 0; the one reaching highest).
+        holds 0; the one reaching highest, or a difference or half-width
+        is not finite).
     """
     if not diffs:
         raise ValueError("diffs: no paired differences to judge")
@@ -221,6 +222,10 @@ def order_verdict(diffs: list[tuple[str, str, str, float, float]]) -> tuple[str,
         where, a, b, mean, half = d
         return f"{a} \u2212 {b} = {_num(mean, True)} [{_num(mean - half)}, {_num(mean + half)}] at {where}"
 
+    broken = [d for d in diffs if not (math.isfinite(d[3]) and math.isfinite(d[4]))]
+    if broken:
+        # a non-finite per-run error (a diverged filter) fails every comparison: judge nothing from it
+        return "not shown", line(broken[0]) + " (not finite)"
     against = [d for d in diffs if d[3] - d[4] > 0]
     if against:
         return "not reproduced", line(max(against, key=lambda d: d[3]))
@@ -716,9 +721,12 @@ def _sweep(sections: dict[str, Any], path: Path, name: str) -> SweepPlan:
     except ValueError as e:
         raise ValueError(f"sweep.values: {e}") from None
     _check_swept_values(sweep["values"], figure_opts)
-    names = set()
+    names, swept_names = set(), set()
     for variant in variants or [None]:
-        names.update(f.name for f in plan._filters(plan._scenario(variant), sweep["values"][0], True))
+        for f, takes in plan._filters_swept(plan._scenario(variant), sweep["values"][0], True):
+            names.add(f.name)
+            if takes:
+                swept_names.add(f.name)
     paper = resolve_paper(sections, names, PAPER_PARAMS)
     columns = _summary_columns(scenario)
     for i, vals in enumerate(paper):
@@ -739,7 +747,7 @@ def _sweep(sections: dict[str, Any], path: Path, name: str) -> SweepPlan:
     if "limit" in sections:
         plan.limit = _resolve_limit(sections, scenario)
         plan._limit_filter(scenario, 1)  # builds it (and its label), so a bad table fails here
-    plan.claims = _resolve_claims(sections, plan, names, labels, columns)
+    plan.claims = _resolve_claims(sections, plan, names, labels, columns, swept_names)
     return plan
 
 
@@ -753,7 +761,9 @@ def _resolve_limit(sections: dict[str, Any], scenario: Any) -> dict[str, Any]:
     return limit
 
 
-def _resolve_claims(sections: dict[str, Any], plan: SweepPlan, names: set[str], labels: list[str], columns: list[str]) -> list[dict[str, Any]]:
+def _resolve_claims(
+    sections: dict[str, Any], plan: SweepPlan, names: set[str], labels: list[str], columns: list[str], swept_names: set[str]
+) -> list[dict[str, Any]]:
     """Check the ``[[claim]]`` tables; a value claim without ``value`` takes the matching ``[[paper]]`` entry's."""
     entries = sections.get("claim", [])
     if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
@@ -777,6 +787,9 @@ def _resolve_claims(sections: dict[str, Any], plan: SweepPlan, names: set[str], 
                 raise ValueError(f"{where}.order: name at least two filters")
             out.append(c)
             continue
+        if c["at"] is None and c["filter"] in swept_names and len(values) > 1:
+            # which swept value the paper's number belongs to is not guessable
+            raise ValueError(f"{where}.at: required, {c['filter']} is run at every swept value ({values})")
         metric = c["metric"]
         if metric not in columns or not (metric == "rmse" or metric.startswith(("rms_", "rmse_position", "rmse_velocity"))):
             have = ", ".join(m for m in columns if m == "rmse" or m.startswith(("rms_", "rmse_")))

@@ -1,5 +1,15 @@
 """Cuckoo-search particle filters: CS-PF and the improved ICS-PF (paper P1).
 
+Two algorithms share the cuckoo proposals below, chosen by ``acceptance``:
+
+* ``"mh"`` (the default): a resample-move particle filter whose moves are
+  Metropolis–Hastings steps in the space of the process noise, built from
+  the Lévy-flight and discovery proposals; they keep the posterior
+  (:mod:`pursuit.filters.cuckoo_mh`, docs/spec/01-particle-filters.md §10).
+* ``"greedy"``: the paper-literal algorithm described in the rest of this
+  docstring.  It forgets the transition density, so its particles do not
+  represent the posterior, and it can diverge (one-node WSN).
+
 Paper P1 replaces the resampling step of a particle filter by a cuckoo
 search (Yang & Deb 2009): the propagated particles are "nests", the
 measurement likelihood is their fitness, and every time step runs
@@ -388,9 +398,10 @@ class CuckooParticleFilter(ParticleFilterBase):
     motion, measurement, particles, resampler, name, backend
         See :class:`pursuit.filters.particle.ParticleFilterBase`.
     ess_threshold
-        Resample when ESS < ``ess_threshold``·N (None: every step); used
-        only with ``acceptance="greedy"`` and ``weight_mode="sequential"``
-        (default 0.5).
+        Greedy with ``weight_mode="sequential"`` only: resample when
+        ESS < ``ess_threshold``·N (None, the default, means 0.5; 1 resamples
+        at almost every step).  Must be None with ``acceptance="mh"``, which
+        resamples at every measured step.
     search
         The :class:`CuckooSearch` settings (iterations, schedules, moves).
     acceptance
@@ -419,7 +430,7 @@ class CuckooParticleFilter(ParticleFilterBase):
     the weights before resampling.
     """
 
-    ess_threshold: float | None = 0.5
+    ess_threshold: float | None = None
     search: CuckooSearch = _ICS_SEARCH
     acceptance: str = "mh"
     weight_mode: str | None = None
@@ -441,6 +452,7 @@ class CuckooParticleFilter(ParticleFilterBase):
         search = self.search
         bad = [
             ("weight_mode", self.weight_mode is not None, "the weights are uniform after the moves"),
+            ("ess_threshold", self.ess_threshold is not None, "resample-move resamples at every measured step"),
             ("step_scaling", search.step_scaling not in (None, "absolute"), "only the absolute Lévy step in noise space is symmetric"),
             ("f_stop", search.f_stop is not None, "a stopping rule on the fitness breaks the move's invariance"),
             ("lower", search.lower is not None, "a box in state space breaks the move's invariance"),
@@ -460,6 +472,11 @@ class CuckooParticleFilter(ParticleFilterBase):
                 f'motion: acceptance="mh" needs an additive Gaussian motion model x = f(x) + G xi; '
                 f'{type(motion).__name__} is not; use acceptance="greedy"'
             )
+
+    @property
+    def greedy_ess_threshold(self) -> float:
+        """The ESS fraction greedy sequential mode resamples below (``ess_threshold``, 0.5 when None)."""
+        return 0.5 if self.ess_threshold is None else float(self.ess_threshold)
 
     @property
     def mode(self) -> str:
@@ -548,7 +565,7 @@ class CuckooParticleFilter(ParticleFilterBase):
         need = np.zeros(state.batch, dtype=bool)
         if sequential:
             moved = Weighed(shifted, mx, e, s, F, 0.0, weighed.measured, {})
-            need = self._needs_resampling(moved, ess)
+            need = moved.measured & (ess < self.greedy_ess_threshold * N)
             if need.any():
                 (X,), logw, uniform = self.resample([X], moved, need, rng, None)
         info["weights_reset"] = reset

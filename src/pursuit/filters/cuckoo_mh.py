@@ -63,7 +63,7 @@ scale by the particle's own position or the spread of a population that
 includes it, which breaks the symmetry), ``f_stop`` (a stopping rule that
 looks at the fitness), ``lower``/``upper`` (a box in x space) and the
 filter's ``weight_mode`` (the weights are always uniform after the moves).
-``ess_threshold`` is not used: the filter resamples in every run with a
+So does a set ``ess_threshold``: the filter resamples in every run with a
 measurement, as resample-move requires.
 
 Random numbers per run and step, in this order and always the same count:
