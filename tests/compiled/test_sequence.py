@@ -62,7 +62,8 @@ def test_keep_info_selects_keys():
     zs, x0 = _data(LINEAR, M=20, T=10)
     filt = pu.KalmanFilter(MOTION, LINEAR, backend="numba")
     track = pu.run(filt, zs, pu.Gaussian(x0, np.eye(4)), keep_info=["nis"])
-    assert sorted(track.info) == ["nis"]
+    assert sorted(track.info) == ["diverged", "nis"]  # the divergence flag is kept whatever keep_info says
+    assert not track.info["diverged"].any()
 
 
 class _Flagging:
