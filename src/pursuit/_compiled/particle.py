@@ -235,46 +235,46 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
     sequential = filt.mode == "sequential"
     # the NumPy fitness carries the normalising constant unless the stock all-measured fast path applies
     include_const = bool(hs.angle or not valid.all())
-    alphas = np.array([search.alpha(t) for t in range(search.n_iter)] or [0.0])
-    pas = np.array([search.pa(t) for t in range(search.n_iter)] or [0.0])
-    trend = {"off": CK.TREND_OFF, "exp": CK.TREND_EXP, "linear": CK.TREND_LINEAR}[search.trend]
-    scaling = {"relative": CK.SCALE_RELATIVE, "absolute": CK.SCALE_ABSOLUTE, "std": CK.SCALE_STD}[search.scaling]
-    lower = np.full(n, -np.inf) if search.lower is None else np.broadcast_to(np.asarray(search.lower, float), (n,)).copy()
-    upper = np.full(n, np.inf) if search.upper is None else np.broadcast_to(np.asarray(search.upper, float), (n,)).copy()
-    use_stop = search.f_stop is not None
-    log_stop = float(np.log(search.f_stop)) if use_stop else 0.0
     rkind = RESAMPLER_CODES[filt.resampler]
-    thr = filt.greedy_ess_threshold
-    Xout = np.empty((B, N, n))
-    logw_out = np.empty((B, N))
-    mean, cov = np.empty((B, n)), np.empty((B, n, n))
-    innov, S = np.empty((B, m)), np.empty((B, m, m))
-    nis, loglik, ess, fbest = np.empty(B), np.empty(B), np.empty(B), np.empty(B)
-    dof = np.empty(B, dtype=np.int64)
-    iters, acc = np.empty(B, dtype=np.int64), np.empty(B, dtype=np.int64)
-    reset, need = np.empty(B, dtype=np.bool_), np.empty(B, dtype=np.bool_)
+    out = _cuckoo_outputs(B, N, n, m)
+    pf = out.pf
     kernel = CK.cuckoo_step_parallel if use_parallel(B) else CK.cuckoo_step_serial
-    search_args = SearchArgs(
-        search.n_iter, alphas, pas, float(search.alpha_min), float(search.alpha_max), trend, float(search.kappa),
-        float(search.beta), mantegna_sigma(search.beta), scaling, search.discovery == "yang", log_stop, use_stop, lower, upper,
-    )
-    opts = CuckooOptions(bool(state.uniform), sequential, include_const, filt.estimate == "best", rkind, thr)
-    out = CuckooOutputs(PFOutputs(Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need), fbest, iters, acc)
-    kernel((Xp, logw), (normals, uniforms, Draws(addrs, per_run)), (zf, valid), measurement_args(hs), search_args, opts, out)
+    opts = CuckooOptions(bool(state.uniform), sequential, include_const, filt.estimate == "best", rkind, filt.greedy_ess_threshold)
+    kernel((Xp, logw), (normals, uniforms, Draws(addrs, per_run)), (zf, valid), measurement_args(hs), _search_args(search, n), opts, out)
     if not per_run:
-        _resample_with_numpy_draws(rng, need, rkind, N, logw_out, Xout)
-    info = {
-        **_step_info(batch, m, innov, S, nis, dof, loglik, reset, ess, need),
-        "fitness_best": fbest.reshape(batch),
-        "iterations": iters.reshape(batch),
-        "acceptance": (acc / (2.0 * N * np.maximum(iters, 1))).reshape(batch),
+        _resample_with_numpy_draws(rng, pf.need, rkind, N, pf.logw, pf.particles)
+    info = _cuckoo_info(batch, m, out, out.accepted / (2.0 * N * np.maximum(out.iterations, 1)))
+    return _cuckoo_state(batch, out, rng, k, bool(sequential and pf.need.all()), work), info
+
+
+def _cuckoo_outputs(B: int, N: int, n: int, m: int) -> CuckooOutputs:
+    """Fresh output buffers of a compiled CS-PF / ICS-PF step (greedy or MH) for B runs."""
+    pf = PFOutputs(
+        np.empty((B, N, n)), np.empty((B, N)), np.empty((B, n)), np.empty((B, n, n)), np.empty((B, m)), np.empty((B, m, m)),
+        np.empty(B), np.empty(B, dtype=np.int64), np.empty(B), np.empty(B, dtype=np.bool_), np.empty(B), np.empty(B, dtype=np.bool_),
+    )
+    return CuckooOutputs(pf, np.empty(B), np.empty(B, dtype=np.int64), np.empty(B, dtype=np.int64))
+
+
+def _cuckoo_info(batch: tuple[int, ...], m: int, out: CuckooOutputs, acceptance: np.ndarray) -> dict[str, np.ndarray]:
+    """The step info of a compiled CS-PF / ICS-PF step: the PF's keys and the search's."""
+    pf = out.pf
+    return {
+        **_step_info(batch, m, pf.innov, pf.S, pf.nis, pf.dof, pf.loglik, pf.reset, pf.ess, pf.need),
+        "fitness_best": out.fitness_best.reshape(batch),
+        "iterations": out.iterations.reshape(batch),
+        "acceptance": np.asarray(acceptance).reshape(batch),
     }
-    uniform = bool(sequential and need.all())
-    new = ParticleState(
-        Xout.reshape(*batch, N, n), logw_out.reshape(*batch, N), mean.reshape(*batch, n), cov.reshape(*batch, n, n),
+
+
+def _cuckoo_state(batch: tuple[int, ...], out: CuckooOutputs, rng, k: int, uniform: bool, work) -> ParticleState:
+    """The filter state after a compiled CS-PF / ICS-PF step."""
+    pf = out.pf
+    N, n = pf.particles.shape[1:]
+    return ParticleState(
+        pf.particles.reshape(*batch, N, n), pf.logw.reshape(*batch, N), pf.mean.reshape(*batch, n), pf.cov.reshape(*batch, n, n),
         rng, k, uniform, work=work,
     )
-    return new, info
 
 
 def _search_args(search, n: int) -> SearchArgs:
@@ -342,34 +342,17 @@ def _mh_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: ParticleSta
             normals, uniforms = np.empty((B, 0)), np.empty((B, 0))
     # the NumPy fitness carries the normalising constant unless the stock all-measured fast path applies
     include_const = bool(hs.angle or not valid.all())
-    Xout = np.empty((B, N, n))
-    logw_out = np.empty((B, N))
-    mean, cov = np.empty((B, n)), np.empty((B, n, n))
-    innov, S = np.empty((B, m)), np.empty((B, m, m))
-    nis, loglik, ess, fbest = np.empty(B), np.empty(B), np.empty(B), np.empty(B)
-    dof = np.empty(B, dtype=np.int64)
-    iters, acc = np.empty(B, dtype=np.int64), np.empty(B, dtype=np.int64)
-    reset, need = np.empty(B, dtype=np.bool_), np.empty(B, dtype=np.bool_)
+    out = _cuckoo_outputs(B, N, n, m)
     kernel = CK.mh_step_parallel if use_parallel(B) else CK.mh_step_serial
     opts = MHOptions(include_const, filt.estimate == "weighted", rkind)
     kernel(
         (Xp, Mp, XI, logw), (ures, normals, uniforms), Draws(addrs, per_run), (zf, valid), G, measurement_args(hs),
-        _search_args(search, n), opts, PFOutputs(Xout, logw_out, mean, cov, innov, S, nis, dof, loglik, reset, ess, need),
-        (fbest, iters, acc),
+        _search_args(search, n), opts, out.pf, (out.fitness_best, out.iterations, out.accepted),
     )
     h = N // 2
     proposals = search.n_iter * (N + (h if N - h >= 2 else 0) + ((N - h) if h >= 2 else 0))
-    info = {
-        **_step_info(batch, m, innov, S, nis, dof, loglik, reset, ess, need),
-        "fitness_best": fbest.reshape(batch),
-        "iterations": iters.reshape(batch),
-        "acceptance": (acc / max(proposals, 1)).reshape(batch),
-    }
-    new = ParticleState(
-        Xout.reshape(*batch, N, n), logw_out.reshape(*batch, N), mean.reshape(*batch, n), cov.reshape(*batch, n, n),
-        rng, k, bool(need.all()), work=work,
-    )
-    return new, info
+    info = _cuckoo_info(batch, m, out, out.accepted / max(proposals, 1))
+    return _cuckoo_state(batch, out, rng, k, bool(out.pf.need.all()), work), info
 
 
 BOOTSTRAP = CompiledPath(step=bootstrap_step, sequence=bootstrap_sequence)
