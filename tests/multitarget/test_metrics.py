@@ -271,6 +271,8 @@ def test_track_switches_when_two_tracks_swap_targets():
     lab = np.array([[1, 2], [1, 2], [2, 1], [2, 1]])
     mask = np.ones((K, 2), bool)
     np.testing.assert_array_equal(track_switches(truth, mask, est, lab, mask, c=3.0), [1, 1])
+    counts = track_counts(truth, mask, est, lab, mask, c=3.0)  # swapped, but every scan assigned
+    assert (counts.confirmed, counts.false, counts.lost, counts.truths) == (2, 0, 0, 2)
     # the truth rows absent at a scan do not count either
     tm = mask.copy()
     tm[1:3, 0] = False

@@ -424,7 +424,7 @@ def track_counts(truth_positions, truth_mask, est_positions, est_labels, est_mas
     unassigned = (mx & (to_est < 0)).sum(axis=0)
     lost = (2 * unassigned > exists).sum(axis=-1)
     truths = (exists > 0).sum(axis=-1)
-    return TrackCounts(confirmed.reshape(batch), false.reshape(batch), lost.reshape(batch), truths.reshape(batch))
+    return TrackCounts(*(np.asarray(a).reshape(batch) for a in (confirmed, false, lost, truths)))
 
 
 # --------------------------------------------------------------------------
