@@ -113,7 +113,7 @@ def _parser(track: bool = True) -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
     ls = sub.add_parser("list", help="list models, filters, scenarios, fading strategies and experiments")
-    ls.add_argument("kind", nargs="?", choices=["models", "filters", "scenarios", "fading", "experiments"], help="only this kind")
+    ls.add_argument("kind", nargs="?", choices=["models", "filters", "scenarios", "fading", "trackers", "experiments"], help="only this kind")
     ls.add_argument("-v", "--verbose", action="store_true", help="show every parameter")
 
     for name, help_ in (("run", "run an experiment file"), ("reproduce", "run bundled experiments by name, or all")):
@@ -268,8 +268,8 @@ def _cmd_list(args) -> int:
     """
     from .experiment import ConfigError, find_experiment, list_experiments, read_toml
 
-    kinds = {"models": "model", "filters": "filter", "scenarios": "scenario", "fading": "fading"}
-    wanted = [args.kind] if args.kind else ["models", "filters", "fading", "scenarios", "experiments"]
+    kinds = {"models": "model", "filters": "filter", "scenarios": "scenario", "fading": "fading", "trackers": "tracker"}
+    wanted = [args.kind] if args.kind else ["models", "filters", "fading", "scenarios", "trackers", "experiments"]
     for plural in wanted:
         print(f"{plural}:")
         if plural == "experiments":

@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 
 __all__ = ["Param", "Component", "register", "get", "components", "REQUIRED", "KINDS", "REGISTERING_PACKAGES", "field_param", "params_from", "field_default", "field_annotation", "toml_type"]
 
-KINDS = ("scenario", "filter", "fading", "experiment", "model")
+KINDS = ("scenario", "filter", "fading", "experiment", "model", "tracker")
 
 REGISTERING_PACKAGES = ("pursuit.config", "pursuit.experiments")
 """Packages whose every module is imported (and so registers its components) on first look-up."""
@@ -209,7 +209,7 @@ def components(kind: str) -> list[Component]:
     return [seen[k] for k in sorted(seen)]
 
 
-LISTED_KINDS = ("model", "filter", "fading", "scenario")
+LISTED_KINDS = ("model", "filter", "fading", "scenario", "tracker")
 """The kinds ``pursuit list`` prints from :mod:`pursuit._catalog`."""
 
 

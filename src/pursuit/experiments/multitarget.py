@@ -1,0 +1,210 @@
+"""The ``multitarget`` experiment kind: several multi-target trackers on one scenario, scored by GOSPA.
+
+Sections: ``[scenario]`` (an ``mt-*`` scenario), ``[[trackers]]`` (``gnn``,
+``jpda``, each with its per-track filter), ``[metrics]`` (GOSPA's cut-off,
+order and α), ``[figures]``.  Every tracker sees the same truth and
+detections (common random numbers, one stream per run); all runs are
+tracked in one batch, so this kind does not chunk runs or use the Dask
+backend.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import registry
+from ..config.build import build_scenario, resolve_section
+from ..multitarget.metrics import gospa, gospa_summary, track_counts, track_switches
+from ..multitarget.tracking import MultiTrackResult, track_scans
+from ..registry import Param, register
+from ..report.mt_figures import gospa_over_time, scene
+from ..rng import run_streams
+from ..scenarios.multitarget import MultiTargetScenario
+from ..tables import ExperimentOutput, Table
+from .montecarlo import check_run_exists, run_index
+
+__all__ = ["MultiTargetPlan", "TrackerScore", "score"]
+
+SCENARIO_STREAM = 0  # the scenario's stream of each run (the trackers draw nothing)
+
+
+def _positive(field_name: str, v: float) -> float:
+    if not v > 0:
+        raise ValueError(f"{field_name}: must be positive, got {v!r}")
+    return v
+
+
+def _order(field_name: str, v: float) -> float:
+    if not (1.0 <= v < np.inf):
+        raise ValueError(f"{field_name}: must be a finite number >= 1, got {v!r}")
+    return v
+
+
+def _alpha(field_name: str, v: float) -> float:
+    if not 0.0 < v <= 2.0:
+        raise ValueError(f"{field_name}: must lie in (0, 2], got {v!r}")
+    return v
+
+
+METRIC_PARAMS = (
+    Param("c", "float", 10.0, "GOSPA cut-off distance (position units)", check=_positive),
+    Param("p", "float", 2.0, "GOSPA order p >= 1", check=_order),
+    Param("alpha", "float", 2.0, "GOSPA alpha in (0, 2]; 2 gives the localisation / missed / false parts", check=_alpha),
+)
+FIGURE_PARAMS = (Param("scene_run", "int", 0, "which run's truth, detections and tracks to draw (0 .. runs-1)", check=run_index),)
+
+
+@dataclass(frozen=True)
+class TrackerScore:
+    """One tracker's scores over the runs (arrays over runs ``(M,)`` or scans and runs ``(K, M)``)."""
+
+    name: str
+    result: MultiTrackResult
+    gospa: Any  # pursuit.multitarget.metrics.Gospa, (K, M)
+    summary: dict[str, Any]  # gospa_summary
+    switches: np.ndarray  # (M,) track switches per run
+    counts: Any  # TrackCounts, (M,)
+    wall_time: float
+
+
+def score(name: str, result: MultiTrackResult, truth: Any, position_indices, metrics: dict[str, float], wall_time: float) -> TrackerScore:
+    """GOSPA, its parts, track switches and track counts of one tracker's result against the truth."""
+    est, est_mask = result.positions(position_indices)
+    tp = truth.positions(position_indices)
+    tmask = truth.exists
+    g = gospa(tp, tmask, est, est_mask, metrics["c"], metrics["p"], metrics["alpha"])
+    switches = track_switches(tp, tmask, est, result.label, est_mask, metrics["c"], metrics["p"]).sum(axis=-1)
+    counts = track_counts(tp, tmask, est, result.label, est_mask, metrics["c"], metrics["p"])
+    return TrackerScore(name, result, g, gospa_summary(g), switches, counts, wall_time)
+
+
+def _mean_ci(values: np.ndarray) -> tuple[float, float]:
+    v = np.asarray(values, dtype=float)
+    if v.size < 2:
+        return float(v.mean()), float("nan")
+    return float(v.mean()), float(1.96 * v.std(ddof=1) / np.sqrt(v.size))
+
+
+def summary_table(scores: list[TrackerScore], scenario: Any, runs: int, seed: int, metrics: dict[str, float]) -> Table:
+    """Mean GOSPA (with its 95 % interval over runs), its parts, switches, track counts and speed per tracker."""
+    rows = []
+    steps = scenario.steps
+    for s in scores:
+        tot = s.summary["total"]
+        sw, sw_ci = _mean_ci(s.switches)
+        rows.append([
+            s.name, tot.mean, tot.half_width,
+            s.summary["localisation"].mean, s.summary["missed"].mean, s.summary["false"].mean,
+            sw, sw_ci,
+            float(np.mean(s.counts.confirmed)), float(np.mean(s.counts.false)), float(np.mean(s.counts.lost)),
+            float(np.mean(s.result.dropped.sum(axis=0))),
+            s.wall_time, runs * steps / s.wall_time if s.wall_time > 0 else None,
+        ])
+    c, p, a = metrics["c"], metrics["p"], metrics["alpha"]
+    return Table(
+        "summary",
+        f"{scenario.name}: {runs} runs, seed {seed}; GOSPA c = {c:g}, p = {p:g}, alpha = {a:g}",
+        ["tracker", "gospa", "gospa_ci95", "localisation", "missed", "false", "switches", "switches_ci95",
+         "confirmed_tracks", "false_tracks", "lost_truths", "dropped_tracks", "wall_time_s", "scans_per_s"],
+        rows,
+        notes=(
+            "gospa: GOSPA per scan averaged over scans and runs (distance units), with the half-width of its 95 % "
+            f"Student-t interval over the runs' time averages; localisation, missed, false: its parts in units of "
+            f"distance^p, averaged over scans and runs (they add up to the mean of GOSPA^p, not of GOSPA). "
+            "switches: label changes of the track assigned to a truth, per run. confirmed_tracks: distinct labels "
+            "confirmed in a run; false_tracks: those assigned to no truth for more than half their life; "
+            "lost_truths: truths unassigned for more than half their existence. scans_per_s: runs x scans / wall time "
+            "(all runs in one batch, one process)."
+        ),
+    )
+
+
+@dataclass
+class MultiTargetPlan:
+    """A validated ``multitarget`` experiment."""
+
+    name: str
+    scenario: MultiTargetScenario
+    trackers: list[Any]
+    metrics: dict[str, float]
+    figure_opts: dict[str, Any]
+    sections: dict[str, Any] = field(repr=False)
+
+    def check_runs(self, runs: int) -> None:
+        """Raise ``ValueError`` (naming the field) when an option refers to a run beyond ``runs``."""
+        check_run_exists("figures.scene_run", self.figure_opts["scene_run"], runs)
+
+    def run(self, *, runs: int, seed: int, progress: bool = False, chunk_size: int | None = None) -> ExperimentOutput:
+        """Simulate once, track with every tracker, score and assemble tables and figures.
+
+        ``chunk_size`` is accepted for the common interface and ignored: the
+        runs are tracked in one batch.
+        """
+        self.check_runs(runs)
+        truth, scans = self.scenario.simulate(run_streams(seed, range(runs), SCENARIO_STREAM), runs)
+        pos = self.scenario.position_indices
+        scores = []
+        for tracker in self.trackers:
+            t0 = time.perf_counter()
+            result = track_scans(tracker, scans.z, times=scans.times)
+            wall = time.perf_counter() - t0
+            scores.append(score(tracker.name, result, truth, pos, self.metrics, wall))
+            if progress:
+                print(f"  {tracker.name}: {wall:.2f} s", flush=True)
+        table = summary_table(scores, self.scenario, runs, seed, self.metrics)
+        run = self.figure_opts["scene_run"]
+        figs = {
+            "gospa": gospa_over_time({s.name: s.summary for s in scores}, scans.times, self.metrics),
+            "scene": scene(truth, scans, {s.name: s.result for s in scores}, pos, run, title_prefix=self.scenario.name),
+        }
+        results = {f"gospa_{s.name}": np.asarray(s.gospa.total) for s in scores}
+        return ExperimentOutput(self.name, "", "", [table], figs, results=results)
+
+
+_KNOWN_SECTIONS = {"scenario", "trackers", "metrics", "figures"}
+
+
+def build_trackers(sections: dict[str, Any], scenario: Any) -> list[Any]:
+    """Build every ``[[trackers]]`` entry against the scenario; names must be unique."""
+    entries = sections.get("trackers")
+    if entries is None:
+        raise ValueError("trackers: required section is missing (add [[trackers]] tables)")
+    if not isinstance(entries, list) or not entries or not all(isinstance(e, dict) for e in entries):
+        raise ValueError("trackers: expected one or more [[trackers]] tables")
+    out = []
+    for i, entry in enumerate(entries):
+        where = f"trackers[{i}]"
+        values = dict(entry)
+        kind = values.pop("type", None)
+        if kind is None:
+            raise ValueError(f"{where}.type: required (gnn or jpda)")
+        comp = registry.get("tracker", kind, f"{where}.type")
+        out.append(comp.build(scenario=scenario, where=where, **comp.resolve(values, where)))
+    names = [t.name for t in out]
+    for i, n in enumerate(names):
+        if names.index(n) != i:
+            raise ValueError(f"trackers[{i}].name: {n!r} is used twice (give each tracker its own name)")
+    return out
+
+
+@register(
+    "experiment",
+    "multitarget",
+    "Compare multi-target trackers on one scenario by GOSPA; sections [scenario], [[trackers]], [metrics], [figures]",
+)
+def _multitarget(sections: dict[str, Any], path: Path, name: str) -> MultiTargetPlan:
+    for key in sections:
+        if key not in _KNOWN_SECTIONS:
+            raise ValueError(f"{key}: unknown section (known: experiment, {', '.join(sorted(_KNOWN_SECTIONS))})")
+    scenario = build_scenario(sections)
+    if not isinstance(scenario, MultiTargetScenario):
+        raise ValueError("scenario.type: the multitarget kind needs a multi-target scenario (mt-crossing, mt-williams, mt-maneuvering)")
+    trackers = build_trackers(sections, scenario)
+    metrics = resolve_section(sections, "metrics", METRIC_PARAMS)
+    figure_opts = resolve_section(sections, "figures", FIGURE_PARAMS)
+    return MultiTargetPlan(name, scenario, trackers, metrics, figure_opts, sections)
