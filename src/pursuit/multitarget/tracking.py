@@ -41,6 +41,14 @@ def _layout_motion(filt: Any) -> Any:
     return motion
 
 
+def _layout_measurement(filt: Any) -> Any:
+    """The filter's measurement model, or an IMM's first mode's (the modes share the sensor)."""
+    measurement = getattr(filt, "measurement", None)
+    if measurement is None and hasattr(filt, "filters"):
+        measurement = getattr(filt.filters[0], "measurement", None)
+    return measurement
+
+
 @dataclass(frozen=True)
 class TrackerBase:
     """What GNN and JPDA share: the per-track filter, the detection model, the gate, track management.
@@ -108,7 +116,7 @@ class TrackerBase:
             if motion is None or not hasattr(motion, "position_indices"):
                 raise ValueError("filter: initiation (max_speed) needs a motion model with position_indices")
             if self.position is None:
-                to_position = detection_positions(self.filter.measurement if hasattr(self.filter, "measurement") else None, motion)
+                to_position = detection_positions(_layout_measurement(self.filter), motion)
                 if to_position is None:
                     raise ValueError(
                         "position: give a function from a detection to a position and covariance; the measurement "
