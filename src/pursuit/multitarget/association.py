@@ -141,8 +141,8 @@ def evaluate_hypotheses(
     flat batch ``(P,)`` (free slots and padding rows are skipped: with a
     capacity well above the number of tracks most of ``(M, L, D)`` is
     empty), stepped once, and scattered back to ``(M, L, D)``; the missed
-    hypothesis is one step of the whole ``(M, L)`` batch with NaN
-    measurements.
+    hypothesis is one step of the alive tracks with NaN measurements (a free
+    slot keeps its state).
 
     Parameters
     ----------
@@ -161,7 +161,7 @@ def evaluate_hypotheses(
     """
     M, D, m = z.shape
     L = alive.shape[1]
-    missed, _ = filt.step(state, np.full((M, L, m), np.nan), k=k, dt=dt)
+    missed = _predict_alive(filt, state, alive, m, k, dt)
     detected = ~np.isnan(z).any(axis=-1)
     runs, tracks, dets = np.nonzero(alive[:, :, None] & detected[:, None, :])
     nis = np.full((M, L, D), np.nan)
@@ -187,6 +187,24 @@ def evaluate_hypotheses(
     within = nis <= chi2_gate_thresholds(gate, m)[dof]  # NaN NIS (no pair) compares False
     gated = within & detected[:, None, :] & alive[:, :, None]
     return Hypotheses(missed, states, nis, loglik, detected, gated)
+
+
+def _predict_alive(filt: Any, state: Any, alive: np.ndarray, m: int, k: int, dt: float | None) -> Any:
+    """The missed hypothesis: a step without a measurement for the alive tracks (free slots keep their state)."""
+    runs, tracks = np.nonzero(alive)
+    if runs.size == alive.size:
+        return filt.step(state, np.full((*alive.shape, m), np.nan), k=k, dt=dt)[0]
+    if runs.size == 0:
+        return state
+    flat = _map_state(lambda a: a[runs, tracks], 2, state)
+    stepped, _ = filt.step(flat, np.full((runs.size, m), np.nan), k=k, dt=dt)
+
+    def scatter(part: np.ndarray, full: np.ndarray) -> np.ndarray:
+        out = np.array(full)
+        out[runs, tracks] = part
+        return out
+
+    return _map_state(scatter, 1, stepped, state)
 
 
 def log_weights(hyp: Hypotheses, p_detect: float, clutter_density: float, gate: float) -> np.ndarray:

@@ -47,13 +47,15 @@ def combine(
     ``beta`` is 0 (padding, outside the gate).
     """
     on = beta > 0.0
+    M, L, D, n = means.shape
     xs = np.where(on[..., None], means, 0.0)
     Ps = np.where(on[..., None, None], covs, 0.0)
-    mean = beta0[..., None] * missed_mean + np.einsum("mlr,mlrn->mln", beta, xs)
+    b = beta[:, :, None, :]  # (M, L, 1, D): sums over hypotheses as batched products
+    mean = beta0[..., None] * missed_mean + (b @ xs)[:, :, 0]
     d0 = missed_mean - mean
-    d = np.where(on[..., None], xs - mean[:, :, None, :], 0.0)
+    d = np.where(on[..., None], xs - mean[:, :, None, :], 0.0) * np.sqrt(beta)[..., None]
     cov = beta0[..., None, None] * (missed_cov + d0[..., :, None] * d0[..., None, :])
-    cov = cov + np.einsum("mlr,mlrij->mlij", beta, Ps) + np.einsum("mlr,mlri,mlrj->mlij", beta, d, d)
+    cov = cov + (b @ Ps.reshape(M, L, D, n * n)).reshape(M, L, n, n) + np.swapaxes(d, -1, -2) @ d
     return mean, symmetrize(cov)
 
 
