@@ -13,7 +13,6 @@ from pursuit.filters import InteractingMultipleModel as IMM
 from pursuit.gaussian import Gaussian
 from pursuit.multitarget.association import (
     evaluate_hypotheses,
-    expand_state,
     jpda_marginals,
     jpda_marginals_lbp,
     log_weights,
@@ -110,12 +109,14 @@ def test_hypotheses_are_single_kalman_steps_and_gate_by_chi_square():
     thr = chi2_gate_thresholds(0.99, 2)[2]
     for m, t, r in itertools.product(range(M), range(L), range(D)):
         if not alive[m, t] or np.isnan(z[m, r, 0]):
-            assert not hyp.gated[m, t, r]
+            assert not hyp.gated[m, t, r] and hyp.pair[m, t, r] == -1
             continue
         one = kf.init(Gaussian(mean[m, t], np.eye(4) * 2.0))
         s, info = kf.step(one, z[m, r], k=1)
-        np.testing.assert_allclose(hyp.states.mean[m, t, r], s.mean, rtol=1e-12, atol=1e-12)
-        np.testing.assert_allclose(hyp.states.cov[m, t, r], s.cov, rtol=1e-12, atol=1e-12)
+        i = hyp.pair[m, t, r]
+        assert (hyp.runs[i], hyp.tracks[i], hyp.dets[i]) == (m, t, r)
+        np.testing.assert_allclose(hyp.states.mean[i], s.mean, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(hyp.states.cov[i], s.cov, rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(hyp.loglik[m, t, r], info["loglik"], rtol=1e-12)
         assert hyp.gated[m, t, r] == (info["nis"] <= thr)
     pred, _ = kf.step(kf.init(Gaussian(mean[0, 0], np.eye(4) * 2.0)), [np.nan, np.nan], k=1)
@@ -132,14 +133,15 @@ def test_state_tree_operations_on_an_imm_state():
     rng = np.random.default_rng(2)
     a = imm.init(Gaussian(rng.normal(size=(2, 3, 4)), np.eye(4)), batch=(2, 3))
     b = imm.init(Gaussian(rng.normal(size=(2, 3, 4)), np.eye(4) * 2), batch=(2, 3))
-    wide = expand_state(a, 5)
-    assert wide.mean.shape == (2, 3, 5, 4) and wide.modes[1].cov.shape == (2, 3, 5, 4, 4)
-    assert wide.probs.shape == (2, 3, 5, 2)
+    flat = imm.init(Gaussian(rng.normal(size=(5, 4)), np.eye(4) * 3), batch=(5,))  # five pair states
     mask = np.array([[True, False, True], [False, False, True]])
     w = where_state(mask, a, b)
     np.testing.assert_array_equal(w.modes[0].mean[mask], a.modes[0].mean[mask])
     np.testing.assert_array_equal(w.modes[0].mean[~mask], b.modes[0].mean[~mask])
-    index = np.array([[0, 1, 5], [2, 0, 3]])
-    s = select_state(b, expand_state(a, 5), index)
-    np.testing.assert_array_equal(s.mean[index == 0], b.mean[index == 0])
-    np.testing.assert_array_equal(s.modes[1].cov[index > 0], a.modes[1].cov[index > 0])
+    np.testing.assert_array_equal(w.probs[~mask], b.probs[~mask])
+    position = np.array([[-1, 0, 4], [2, -1, 3]])
+    s = select_state(b, flat, position)
+    np.testing.assert_array_equal(s.mean[position < 0], b.mean[position < 0])
+    np.testing.assert_array_equal(s.modes[1].cov[0, 2], flat.modes[1].cov[4])
+    np.testing.assert_array_equal(s.modes[0].mean[1, 0], flat.modes[0].mean[2])
+    assert s.k == b.k

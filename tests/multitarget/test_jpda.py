@@ -57,7 +57,9 @@ def test_moment_matching_equals_the_spread_of_means_formula(seed):
     w = rng.random((M, L, D + 1))
     w /= w.sum(axis=-1, keepdims=True)
     beta0, beta = w[..., 0], w[..., 1:]
-    x, P = combine(hyp.missed.mean, hyp.missed.cov, hyp.states.mean, hyp.states.cov, beta, beta0)
+    assert (hyp.pair >= 0).all()
+    pb = beta[hyp.runs, hyp.tracks, hyp.dets]
+    x, P = combine(hyp.missed.mean, hyp.missed.cov, hyp.states.mean, hyp.states.cov, hyp.runs, hyp.tracks, pb, beta0)
 
     F, Q, H, R = kf.motion.transition_matrix(), kf.motion.cov(), kf.measurement.matrix(), kf.measurement.cov()
     xb = mean @ F.T

@@ -20,7 +20,7 @@ maximises Σ log g over one-to-one assignments; JPDA weighs every joint event
 by Π g (:func:`jpda_marginals`).
 
 Filter states are small dataclass trees of arrays (``GaussianState``,
-``IMMState``); :func:`expand_state`, :func:`select_state` and
+``IMMState``); :func:`select_state` and
 :func:`where_state` act on every batched array of such a tree, so the
 trackers select and replace whole states whatever the filter.
 """
@@ -43,8 +43,9 @@ __all__ = [
     "log_weights",
     "jpda_marginals",
     "jpda_marginals_lbp",
-    "expand_state",
     "select_state",
+    "gather_state",
+    "scatter_state",
     "where_state",
     "MAX_EVENTS",
 ]
@@ -74,26 +75,40 @@ def _map_state(fn: Callable[..., Any], nb: int, state: Any, *others: Any) -> Any
     return state  # step index, a strategy's scalar memory: shared by the whole batch
 
 
-def expand_state(state: Any, D: int) -> Any:
-    """A state of batch ``(M, L)`` broadcast to ``(M, L, D)`` (read-only views, no copy)."""
-    return _map_state(lambda a: np.broadcast_to(a[:, :, None], (*a.shape[:2], D, *a.shape[2:])), 2, state)
+def select_state(missed: Any, pairs: Any, position: np.ndarray) -> Any:
+    """Per track, the missed-detection state (``position < 0``) or the pair state at ``position``.
 
-
-def select_state(missed: Any, hyps: Any, index: np.ndarray) -> Any:
-    """Per track, the missed-detection state (``index == 0``) or hypothesis ``index − 1``.
-
-    ``missed`` has batch ``(M, L)``, ``hyps`` ``(M, L, D)``; ``index (M, L)``
-    lies in ``0..D``.
+    ``missed`` has batch ``(M, L)``, ``pairs`` the flat batch ``(P,)`` of
+    :attr:`Hypotheses.states`; ``position (M, L)`` indexes it (−1: missed).
     """
-    pick = np.maximum(index - 1, 0)
+    if pairs is None or not (position >= 0).any():
+        return missed
+    pick = np.maximum(position, 0)
+    missed_here = position < 0
 
-    def take(a: np.ndarray, h: np.ndarray) -> np.ndarray:
-        tail = h.ndim - 3
-        idx = pick.reshape(*pick.shape, 1, *(1,) * tail)
-        chosen = np.take_along_axis(h, idx, axis=2)[:, :, 0]
-        return np.where((index == 0).reshape(*index.shape, *(1,) * tail), a, chosen)
+    def take(a: np.ndarray, p: np.ndarray) -> np.ndarray:
+        return np.where(missed_here.reshape(*missed_here.shape, *(1,) * (a.ndim - 2)), a, p[pick])
 
-    return _map_state(take, 2, missed, hyps)
+    return _map_state(take, 2, missed, pairs)
+
+
+def gather_state(state: Any, runs: np.ndarray, tracks: np.ndarray) -> Any:
+    """The tracks ``(runs[i], tracks[i])`` of a state of batch ``(M, L)``, as a flat batch ``(P,)``."""
+    return _map_state(lambda a: a[runs, tracks], 2, state)
+
+
+def scatter_state(flat: Any, state: Any, runs: np.ndarray, tracks: np.ndarray) -> Any:
+    """``state`` (batch ``(M, L)``) with the tracks ``(runs[i], tracks[i])`` replaced by ``flat`` (batch ``(P,)``).
+
+    Scalar fields (the step index) come from ``state``.
+    """
+
+    def put(full: np.ndarray, part: np.ndarray) -> np.ndarray:
+        out = np.array(full)
+        out[runs, tracks] = part
+        return out
+
+    return _map_state(put, 2, state, flat)
 
 
 def where_state(mask: np.ndarray, a: Any, b: Any) -> Any:
@@ -114,9 +129,15 @@ class Hypotheses:
         The filter state after a step without a measurement (the missed
         hypothesis), batch ``(M, L)``.
     states
-        The filter state after updating with each detection, batch ``(M, L, D)``.
+        The filter state after updating with each detection, for the pairs of
+        an alive track and a real detection only: flat batch ``(P,)``
+        (None when there is no pair).
+    pair
+        ``(M, L, D)`` position of each pair in ``states``, −1 for none.
+    runs, tracks, dets
+        ``(P,)`` the run, track slot and detection row of each pair.
     nis, loglik
-        ``(M, L, D)`` NIS and log N(ν; 0, S) of each pair (NaN / 0 for padding).
+        ``(M, L, D)`` NIS and log N(ν; 0, S) of each pair (NaN / 0 where none).
     detected
         ``(M, D)``: True for a real detection (not a NaN padding row).
     gated
@@ -126,6 +147,10 @@ class Hypotheses:
 
     missed: Any
     states: Any
+    pair: np.ndarray
+    runs: np.ndarray
+    tracks: np.ndarray
+    dets: np.ndarray
     nis: np.ndarray
     loglik: np.ndarray
     detected: np.ndarray
@@ -140,9 +165,8 @@ def evaluate_hypotheses(
     The pairs of an alive track and a real detection are gathered into one
     flat batch ``(P,)`` (free slots and padding rows are skipped: with a
     capacity well above the number of tracks most of ``(M, L, D)`` is
-    empty), stepped once, and scattered back to ``(M, L, D)``; the missed
-    hypothesis is one step of the alive tracks with NaN measurements (a free
-    slot keeps its state).
+    empty) and stepped once; the missed hypothesis is one step of the alive
+    tracks with NaN measurements (a free slot keeps its state).
 
     Parameters
     ----------
@@ -164,29 +188,21 @@ def evaluate_hypotheses(
     missed = _predict_alive(filt, state, alive, m, k, dt)
     detected = ~np.isnan(z).any(axis=-1)
     runs, tracks, dets = np.nonzero(alive[:, :, None] & detected[:, None, :])
+    P = runs.size
     nis = np.full((M, L, D), np.nan)
     loglik = np.zeros((M, L, D))
     dof = np.zeros((M, L, D), dtype=np.int64)
-    if runs.size == 0:
-        states = expand_state(missed, D)  # nothing to update; never selected
-    else:
-        flat = _map_state(lambda a: a[runs, tracks], 2, state)
-        stepped, info = filt.step(flat, z[runs, dets], k=k, dt=dt)
-        P = runs.size
+    pair = np.full((M, L, D), -1, dtype=np.int64)
+    pair[runs, tracks, dets] = np.arange(P)
+    states = None
+    if P:
+        states, info = filt.step(gather_state(state, runs, tracks), z[runs, dets], k=k, dt=dt)
         nis[runs, tracks, dets] = np.broadcast_to(info["nis"], (P,))
         loglik[runs, tracks, dets] = np.broadcast_to(info["loglik"], (P,))
         dof[runs, tracks, dets] = np.broadcast_to(info["dof"], (P,))
-
-        def scatter(a: np.ndarray) -> np.ndarray:
-            a = np.broadcast_to(a, (P, *a.shape[1:]))
-            full = np.zeros((M, L, D, *a.shape[1:]), dtype=a.dtype)
-            full[runs, tracks, dets] = a
-            return full
-
-        states = _map_state(scatter, 1, stepped)
     within = nis <= chi2_gate_thresholds(gate, m)[dof]  # NaN NIS (no pair) compares False
     gated = within & detected[:, None, :] & alive[:, :, None]
-    return Hypotheses(missed, states, nis, loglik, detected, gated)
+    return Hypotheses(missed, states, pair, runs, tracks, dets, nis, loglik, detected, gated)
 
 
 def _predict_alive(filt: Any, state: Any, alive: np.ndarray, m: int, k: int, dt: float | None) -> Any:
@@ -196,15 +212,8 @@ def _predict_alive(filt: Any, state: Any, alive: np.ndarray, m: int, k: int, dt:
         return filt.step(state, np.full((*alive.shape, m), np.nan), k=k, dt=dt)[0]
     if runs.size == 0:
         return state
-    flat = _map_state(lambda a: a[runs, tracks], 2, state)
-    stepped, _ = filt.step(flat, np.full((runs.size, m), np.nan), k=k, dt=dt)
-
-    def scatter(part: np.ndarray, full: np.ndarray) -> np.ndarray:
-        out = np.array(full)
-        out[runs, tracks] = part
-        return out
-
-    return _map_state(scatter, 1, stepped, state)
+    stepped, _ = filt.step(gather_state(state, runs, tracks), np.full((runs.size, m), np.nan), k=k, dt=dt)
+    return dataclasses.replace(scatter_state(stepped, state, runs, tracks), k=stepped.k)
 
 
 def log_weights(hyp: Hypotheses, p_detect: float, clutter_density: float, gate: float) -> np.ndarray:

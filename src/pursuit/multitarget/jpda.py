@@ -38,24 +38,33 @@ def combine(
     missed_cov: np.ndarray,
     means: np.ndarray,
     covs: np.ndarray,
+    runs: np.ndarray,
+    tracks: np.ndarray,
     beta: np.ndarray,
     beta0: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Moment-match the hypotheses: ``(mean (M, L, n), cov (M, L, n, n))``.
+    """Moment-match each track's hypotheses: ``(mean (M, L, n), cov (M, L, n, n))``.
 
-    ``means (M, L, D, n)``, ``covs (M, L, D, n, n)`` may be NaN where
-    ``beta`` is 0 (padding, outside the gate).
+    Parameters
+    ----------
+    missed_mean, missed_cov
+        ``(M, L, n)``, ``(M, L, n, n)``: the missed hypothesis (the prediction).
+    means, covs
+        ``(P, n)``, ``(P, n, n)``: the posterior of each (track, detection) pair.
+    runs, tracks
+        ``(P,)``: the track each pair belongs to.
+    beta, beta0
+        ``(P,)`` the pairs' probabilities, ``(M, L)`` the missed ones.
     """
-    on = beta > 0.0
-    M, L, D, n = means.shape
-    xs = np.where(on[..., None], means, 0.0)
-    Ps = np.where(on[..., None, None], covs, 0.0)
-    b = beta[:, :, None, :]  # (M, L, 1, D): sums over hypotheses as batched products
-    mean = beta0[..., None] * missed_mean + (b @ xs)[:, :, 0]
+    on = beta > 0.0  # pairs outside the gate add nothing (and may hold anything)
+    runs, tracks, w = runs[on], tracks[on], beta[on]
+    xs, Ps = means[on], covs[on]
+    mean = beta0[..., None] * missed_mean
+    np.add.at(mean, (runs, tracks), w[:, None] * xs)
     d0 = missed_mean - mean
-    d = np.where(on[..., None], xs - mean[:, :, None, :], 0.0) * np.sqrt(beta)[..., None]
     cov = beta0[..., None, None] * (missed_cov + d0[..., :, None] * d0[..., None, :])
-    cov = cov + (b @ Ps.reshape(M, L, D, n * n)).reshape(M, L, n, n) + np.swapaxes(d, -1, -2) @ d
+    d = xs - mean[runs, tracks]
+    np.add.at(cov, (runs, tracks), w[:, None, None] * (Ps + d[:, :, None] * d[:, None, :]))
     return mean, symmetrize(cov)
 
 
@@ -94,13 +103,20 @@ class JPDATracker(TrackerBase):
         beta, beta0 = jpda_marginals(log_g, self.max_events)
         M, L, _ = beta.shape
         n = hyp.missed.mean.shape[-1]
-        mean, cov = combine(
-            hyp.missed.mean,
-            np.broadcast_to(hyp.missed.cov, (M, L, n, n)),
-            hyp.states.mean,
-            np.broadcast_to(hyp.states.cov, (*beta.shape, n, n)),
-            beta,
-            beta0,
-        )
+        missed_cov = np.broadcast_to(hyp.missed.cov, (M, L, n, n))
+        if hyp.states is None:
+            mean, cov = hyp.missed.mean, missed_cov
+        else:
+            P = hyp.runs.size
+            mean, cov = combine(
+                hyp.missed.mean,
+                missed_cov,
+                np.broadcast_to(hyp.states.mean, (P, n)),
+                np.broadcast_to(hyp.states.cov, (P, n, n)),
+                hyp.runs,
+                hyp.tracks,
+                beta[hyp.runs, hyp.tracks, hyp.dets],
+                beta0,
+            )
         state = GaussianState(mean=mean, cov=cov, k=hyp.missed.k, memory=hyp.missed.memory)
         return state, (1.0 - beta0) >= 0.5

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..gaussian import Gaussian
 from ..initiation import polar_to_cartesian, two_point
-from .association import where_state
+from .association import scatter_state, where_state
 
 __all__ = ["TrackTable", "new_table", "detection_positions", "update_counts", "initiate"]
 
@@ -208,28 +208,22 @@ def initiate(
     prev = near1[runs, cur]
     slot = free_order[runs, ranks]
 
-    # Two-point priors for the chosen pairs, placed into their slots (others keep a parked prior).
-    motion_n = int(motion.dim)
-    mean = np.zeros((M, L, motion_n))
-    cov = np.broadcast_to(np.eye(motion_n), (M, L, motion_n, motion_n)).copy()
-    started = np.zeros((M, L), dtype=bool)
-    if runs.size:
-        prior = two_point(p1[runs, prev], C1[runs, prev], p2[runs, cur], C2[runs, cur], float(dt), motion)
-        mean[runs, slot] = prior.mean
-        cov[runs, slot] = prior.cov
-        started[runs, slot] = True
     used = np.zeros((M, D), dtype=bool)
     used[runs, cur] = True
     pending = np.where(used[..., None], np.nan, p2)
     if not runs.size:
         return replace(table, pending=pending, pending_cov=np.array(C2), dropped=dropped)
 
-    fresh = filt.init(Gaussian(mean, cov), batch=(M, L), rng=rng)
+    # Two-point priors for the chosen pairs, initialised as a flat batch and placed into their slots.
+    prior = two_point(p1[runs, prev], C1[runs, prev], p2[runs, cur], C2[runs, cur], float(dt), motion)
+    fresh = filt.init(prior, batch=(runs.size,), rng=rng)
+    started = np.zeros((M, L), dtype=bool)
+    started[runs, slot] = True
     label = table.label.copy()
     label[runs, slot] = table.next_label[runs] + ranks
     return replace(
         table,
-        state=where_state(~started, table.state, fresh),
+        state=scatter_state(fresh, table.state, runs, slot),
         alive=table.alive | started,
         label=label,
         next_label=table.next_label + ok.sum(axis=1),
