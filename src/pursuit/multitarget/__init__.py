@@ -1,4 +1,4 @@
-"""Multiple targets in clutter: trackers, track management (spec 05)."""
+"""Multiple targets in clutter: GNN and JPDA trackers with track management (docs/spec/05-multi-target-pmht.md §4)."""
 
 from .association import jpda_marginals
 from .gnn import GNNTracker
