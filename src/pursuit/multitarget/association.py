@@ -289,11 +289,19 @@ def _clusters(gated: np.ndarray, shared: np.ndarray):
     _, comp = connected_components(graph, directed=False)
     track_comp = comp[: M * L].reshape(M, L)
     det_comp = comp[M * L :].reshape(M, D)
-    for c in np.unique(track_comp[shared]):
-        runs, tracks = np.nonzero((track_comp == c) & shared)
-        run = int(runs[0])
-        dets = np.nonzero(det_comp[run] == c)[0]
-        yield run, tracks, dets
+    # Group the shared tracks and their detections by component with one sort each (no scan per cluster).
+    tm, tt = np.nonzero(shared)
+    dm, dr = np.nonzero((gated & shared[..., None]).any(axis=1))
+    t_key, d_key = track_comp[tm, tt], det_comp[dm, dr]
+    t_order, d_order = np.argsort(t_key, kind="stable"), np.argsort(d_key, kind="stable")
+    comps, t_start = np.unique(t_key[t_order], return_index=True)
+    d_start = np.searchsorted(d_key[d_order], comps)
+    d_stop = np.searchsorted(d_key[d_order], comps, side="right")
+    t_stop = np.append(t_start[1:], t_order.size)
+    for i in range(comps.size):
+        ts = t_order[t_start[i] : t_stop[i]]
+        ds = d_order[d_start[i] : d_stop[i]]
+        yield int(tm[ts[0]]), tt[ts], dr[ds]
 
 
 def _enumerate(log_g: np.ndarray, max_events: int) -> np.ndarray | None:
