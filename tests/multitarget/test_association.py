@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import pursuit as pu
-from pursuit.filters.gating import chi2_gate_thresholds
 from pursuit.filters import InteractingMultipleModel as IMM
+from pursuit.filters.gating import chi2_gate_thresholds
 from pursuit.gaussian import Gaussian
 from pursuit.multitarget.association import (
     evaluate_hypotheses,

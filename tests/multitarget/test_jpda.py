@@ -45,7 +45,7 @@ def test_ekf_with_range_bearing():
 
 @pytest.mark.parametrize("seed", range(5))
 def test_moment_matching_equals_the_spread_of_means_formula(seed):
-    """For the KF: x = x̄ + K ν, P = β₀ P̄ + (1 − β₀) P_c + K (Σ β_r ν_r ν_rᵀ − ν νᵀ) Kᵀ (Bar-Shalom & Fortmann)."""
+    """For the KF: x = x̄ + K ν, P = β₀ P̄ + (1 − β₀) P_c + K (Σ β_r ν_r ν_rᵀ − ν νᵀ) Kᵀ (Bar-Shalom, Fortmann)."""
     kf = _checks.kf()
     rng = np.random.default_rng(seed)
     M, L, D = 2, 3, 4

@@ -31,7 +31,6 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..gaussian import Gaussian
 from ..initiation import polar_to_cartesian, two_point
 from .association import scatter_state, where_state
 
