@@ -9,7 +9,8 @@ import pursuit as pu
 from pursuit.filters import InteractingMultipleModel
 from pursuit.gaussian import Gaussian
 from pursuit.multitarget import JPDATracker, track_scans
-from pursuit.multitarget.association import evaluate_hypotheses
+from pursuit.models import ConstantVelocity
+from pursuit.multitarget.association import evaluate_hypotheses, jpda_marginals, log_weights
 from pursuit.multitarget.jpda import combine
 
 from . import _checks
@@ -90,7 +91,52 @@ def test_sigma_point_filter_works():
     _checks.check_tracks_crossing_targets_in_clutter(JPDATracker, pu.CubatureKalmanFilter(kf.motion, kf.measurement))
 
 
-def test_imm_is_refused_with_a_clear_error():
+def test_imm_with_one_mode_equals_its_filter():
+    truth, z = _checks.cluttered_scene(runs=3, K=25)
     kf = _checks.kf()
-    with pytest.raises(ValueError, match="^filter: JPDA .*IMM"):
-        JPDATracker(InteractingMultipleModel([kf, kf]), 0.9, 1e-3)
+    want = track_scans(JPDATracker(kf, 0.9, _checks.CLUTTER_DENSITY, max_speed=3.0), z)
+    got = track_scans(JPDATracker(InteractingMultipleModel([kf]), 0.9, _checks.CLUTTER_DENSITY, max_speed=3.0), z)
+    np.testing.assert_array_equal(got.label, want.label)
+    np.testing.assert_allclose(got.mean, want.mean, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(got.cov, want.cov, rtol=1e-9, atol=1e-9)
+
+
+def test_imm_jpda_moments_match_the_mixture_over_hypotheses_and_modes():
+    """The combined IMM state has the mean and covariance of the mixture over (hypothesis r, mode j), weights β_r μ_jr."""
+    kf = _checks.kf()
+    quiet, loud = kf, pu.KalmanFilter(ConstantVelocity(ndim=2, dt=1.0, q=0.5), kf.measurement)
+    imm = InteractingMultipleModel([quiet, loud], 0.9)
+    rng = np.random.default_rng(3)
+    M, L, D = 2, 2, 3
+    state = imm.init(Gaussian(rng.normal(0.0, 2.0, (M, L, 4)), np.eye(4)), batch=(M, L))
+    z = rng.normal(0.0, 2.0, (M, D, 2))
+    hyp = evaluate_hypotheses(imm, state, z, np.ones((M, L), dtype=bool), 1.0 - 1e-9, k=1)
+    log_g = log_weights(hyp, 0.9, 1e-2, 1.0 - 1e-9)
+    tracker = JPDATracker(imm, 0.9, 1e-2, gate=1.0 - 1e-9)
+    got, _ = tracker.associate(hyp, log_g)
+    beta, beta0 = jpda_marginals(log_g)
+    for m in range(M):
+        for t in range(L):
+            parts = [(beta0[m, t], hyp.missed, (m, t))] + [(beta[m, t, r], hyp.states, hyp.pair[m, t, r]) for r in range(D)]
+            ws, xs, Ps = [], [], []
+            for b, s, i in parts:
+                for j in range(2):
+                    ws.append(b * s.probs[i][j])
+                    xs.append(s.modes[j].mean[i])
+                    Ps.append(s.modes[j].cov[i])
+            ws, xs, Ps = np.array(ws), np.array(xs), np.array(Ps)
+            mean = ws @ xs
+            d = xs - mean
+            cov = np.einsum("a,aij->ij", ws, Ps) + np.einsum("a,ai,aj->ij", ws, d, d)
+            np.testing.assert_allclose(got.mean[m, t], mean, rtol=1e-9, atol=1e-9)
+            np.testing.assert_allclose(got.cov[m, t], cov, rtol=1e-9, atol=1e-9)
+            np.testing.assert_allclose(got.probs[m, t], ws.reshape(-1, 2).sum(axis=0), rtol=1e-12)
+            for j in range(2):
+                wj = ws[j::2] / ws[j::2].sum()
+                np.testing.assert_allclose(got.modes[j].mean[m, t], wj @ xs[j::2], rtol=1e-9, atol=1e-9)
+
+
+def test_imm_tracks_in_clutter():
+    kf = _checks.kf()
+    imm = InteractingMultipleModel([kf, pu.KalmanFilter(ConstantVelocity(ndim=2, dt=1.0, q=0.5), kf.measurement)], 0.95)
+    _checks.check_tracks_crossing_targets_in_clutter(JPDATracker, imm)

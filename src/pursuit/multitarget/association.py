@@ -137,7 +137,9 @@ class Hypotheses:
     runs, tracks, dets
         ``(P,)`` the run, track slot and detection row of each pair.
     nis, loglik
-        ``(M, L, D)`` NIS and log N(ν; 0, S) of each pair (NaN / 0 where none).
+        ``(M, L, D)`` NIS and log-likelihood of each pair (NaN / 0 where
+        none): log N(ν; 0, S), or for an IMM its mixture likelihood
+        ``loglik_mixture``.
     detected
         ``(M, D)``: True for a real detection (not a NaN padding row).
     gated
@@ -198,7 +200,8 @@ def evaluate_hypotheses(
     if P:
         states, info = filt.step(gather_state(state, runs, tracks), z[runs, dets], k=k, dt=dt)
         nis[runs, tracks, dets] = np.broadcast_to(info["nis"], (P,))
-        loglik[runs, tracks, dets] = np.broadcast_to(info["loglik"], (P,))
+        # An IMM's exact likelihood is the mixture's, log Σ_j c̄_j Λ_j (its "loglik" is of the moment-matched Gaussian).
+        loglik[runs, tracks, dets] = np.broadcast_to(info.get("loglik_mixture", info["loglik"]), (P,))
         dof[runs, tracks, dets] = np.broadcast_to(info["dof"], (P,))
     within = nis <= chi2_gate_thresholds(gate, m)[dof]  # NaN NIS (no pair) compares False
     gated = within & detected[:, None, :] & alive[:, :, None]

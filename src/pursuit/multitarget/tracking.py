@@ -57,7 +57,7 @@ class TrackerBase:
     ----------
     filter
         The per-track filter: any pursuit Gaussian filter (KF, EKF, UKF,
-        CKF; the IMM with GNN), with its motion and measurement models.
+        CKF) or an IMM of them, with its motion and measurement models.
     p_detect
         Detection probability P_D in (0, 1].
     clutter_density
