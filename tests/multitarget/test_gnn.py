@@ -96,3 +96,15 @@ def test_imm_tracks_in_clutter():
     meas = LinearGaussian.position(4, cv_quiet.position_indices, 1.0)
     imm = InteractingMultipleModel([pu.KalmanFilter(cv_quiet, meas), pu.KalmanFilter(cv_loud, meas)], 0.95)
     _checks.check_tracks_crossing_targets_in_clutter(GNNTracker, imm)
+
+
+def test_a_compiled_per_track_filter_gives_the_numpy_tracks():
+    pytest.importorskip("numba")
+    truth, z = _checks.cluttered_scene(runs=3, K=25)
+    kf = _checks.kf()
+    compiled = pu.KalmanFilter(kf.motion, kf.measurement, backend="numba")
+    assert compiled.compiled
+    want = track_scans(GNNTracker(kf, 0.9, _checks.CLUTTER_DENSITY, max_speed=3.0), z)
+    got = track_scans(GNNTracker(compiled, 0.9, _checks.CLUTTER_DENSITY, max_speed=3.0), z)
+    np.testing.assert_array_equal(got.label, want.label)
+    np.testing.assert_allclose(got.mean, want.mean, rtol=1e-9, atol=1e-9)
