@@ -2,11 +2,11 @@
 
 Every (track, detection) pair of a scan, for every Monte Carlo run, is one
 *hypothesis*.  :func:`evaluate_hypotheses` evaluates them all with **one**
-call of the per-track filter's ``step`` on the batch of all pairs (each
+call of the per-track filter's ``step`` on the flat batch of all pairs (each
 track's state repeated for each detection) and one call with all-NaN
-measurements (the missed-detection hypothesis, predict only).  So any pursuit filter (KF, EKF, UKF, CKF, IMM)
-gives the innovation, its covariance, the NIS, the log-likelihood and each
-hypothesis's posterior without a line of filter-specific code here.
+measurements (the missed-detection hypothesis, predict only).  So any
+pursuit filter (KF, EKF, UKF, CKF, IMM) gives the NIS, the log-likelihood
+and each hypothesis's posterior without a line of filter-specific code here.
 
 The association weight of a pair is the likelihood ratio of "detection r
 comes from track t" against "track t was missed and r is clutter"
@@ -20,9 +20,10 @@ maximises Σ log g over one-to-one assignments; JPDA weighs every joint event
 by Π g (:func:`jpda_marginals`).
 
 Filter states are small dataclass trees of arrays (``GaussianState``,
-``IMMState``); :func:`select_state` and
-:func:`where_state` act on every batched array of such a tree, so the
-trackers select and replace whole states whatever the filter.
+``IMMState``); :func:`select_state`, :func:`gather_state`,
+:func:`scatter_state` and :func:`where_state` act on every batched array of
+such a tree, so the trackers select and replace whole states whatever the
+filter.
 """
 
 from __future__ import annotations

@@ -1,14 +1,14 @@
 """Global nearest neighbour (GNN) tracker: one best assignment of detections to tracks per scan.
 
 Per run and scan, GNN picks the one-to-one assignment of gated detections
-to tracks that maximises the joint log-likelihood
+to tracks that maximises the joint log-likelihood::
 
     Σ_(t,r) assigned [log P_D + log N(z_r; ẑ_t, S_t)] + Σ_t missed log(1 − P_D P_G) + Σ_r unassigned log λ,
 
 which is Σ log g_tr over the assigned pairs plus a constant
 (:mod:`pursuit.multitarget.association`): a pair is worth taking only when
 g_tr > 1, i.e. the detection explains the track better than "missed and
-clutter".  The problem is a 2-D assignment on the (L + D) × (D + L) matrix
+clutter".  The problem is a 2-D assignment on the (L + D) × (D + L) matrix::
 
     [ −log g_tr (∞ outside the gate)   diag 0 (track t missed)     ]
     [ diag 0 (detection r is clutter)  0                            ]
