@@ -146,3 +146,24 @@ def test_bad_detections_and_initial_tracks_name_the_field():
         track_scans(tracker(capacity=2), scans("xxx"), initial=Gaussian(np.zeros((3, 4)), np.eye(4)))
     with pytest.raises(TypeError, match="^filter: "):
         GNNTracker(object(), 0.9, 1e-4)
+
+
+@pytest.mark.parametrize("kind", [GNNTracker, JPDATracker])
+def test_scans_without_detections(kind):
+    given = Gaussian(np.array([[0.0, 1.0, 0.0, 0.5]]), np.eye(4))
+    for z in (np.zeros((4, 2, 0, 2)), np.full((4, 2, 3, 2), np.nan)):
+        res = track_scans(tracker(kind), z, initial=given)
+        assert (res.label[:2, :, 0] == 0).all() and (res.label[2:, :, 0] == -1).all()  # the third miss deletes it
+        assert (res.label[:, :, 1:] == -1).all()
+        pred = pu.run(pu.KalmanFilter(CV, POS), np.full((4, 2), np.nan), Gaussian(given.mean[0], given.cov))
+        np.testing.assert_allclose(res.mean[:2, 0, 0], pred.mean[:2], rtol=1e-12)
+
+
+def test_irregular_scan_times_step_with_their_differences():
+    times = np.array([0.0, 1.0, 3.0, 3.5, 6.0])
+    k = times[:, None]
+    z = (np.array([1.0, 0.5]) * k)[:, None, None, :]
+    res = track_scans(tracker(max_speed=2.0), z, times=times)
+    assert (res.label[1:, 0] >= 0).sum(axis=-1).tolist() == [1, 1, 1, 1]
+    slot = int(np.nonzero(res.label[-1, 0] >= 0)[0][0])
+    np.testing.assert_allclose(res.mean[-1, 0, slot], [6.0, 1.0, 3.0, 0.5], atol=1e-4)

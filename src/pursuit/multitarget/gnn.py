@@ -81,6 +81,8 @@ class GNNTracker(TrackerBase):
     def associate(self, hyp: Hypotheses, log_g: np.ndarray) -> tuple[Any, np.ndarray]:
         """The assigned hypothesis's posterior per track; hit = a detection was assigned."""
         index = gnn_assign(log_g)
+        if hyp.states is None:  # no detection in any run
+            return hyp.missed, index > 0
         position = np.take_along_axis(hyp.pair, np.maximum(index - 1, 0)[..., None], axis=2)[..., 0]
         position = np.where(index > 0, position, -1)
         return select_state(hyp.missed, hyp.states, position), index > 0
