@@ -434,8 +434,9 @@ def iter_detections(
     Raises
     ------
     DetectionFileError
-        At the first bad record, naming the file, line and field (after the
-        scans complete before it).
+        At the first bad record, naming the file, line and field.  The scans
+        yielded before it are complete; the one being assembled when it came
+        is not yielded (the bad record may have belonged to it).
     """
     if out_of_order not in ("error", "drop"):
         raise ValueError(f"out_of_order: a stream can only use error or drop, got {out_of_order!r} (read_detections sorts)")
