@@ -91,7 +91,10 @@ def test_scans_count_and_read_only():
         (lambda z, o: (z, o.__setitem__((0, 0, 0), -3) or o), "origin"),
         (lambda z, o: (z, o + 0.5), "origin"),
     ],
-    ids=["not-4d", "half-nan-row", "inf", "origin-shape", "detection-marked-padding", "padding-with-origin", "origin-below-2", "origin-float"],
+    ids=[
+        "not-4d", "half-nan-row", "inf", "origin-shape", "detection-marked-padding", "padding-with-origin", "origin-below-2",
+        "origin-float",
+    ],
 )
 def test_scans_validation_names_the_field(change, field):
     base = _scans()

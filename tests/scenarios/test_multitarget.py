@@ -78,6 +78,17 @@ def test_single_generator_needs_runs_and_works():
     assert truth.runs == scans.runs == 6
 
 
+def test_truth_then_detections_equals_simulate():
+    sc = _scenario()
+    truth, scans = sc.simulate(run_streams(4, range(3), 0))
+    streams = run_streams(4, range(3), 0)
+    t2 = sc.simulate_truth(streams)
+    np.testing.assert_array_equal(t2.states, truth.states)
+    np.testing.assert_array_equal(sc.detect(t2, streams).z, scans.z)
+    with pytest.raises(ValueError, match="^rng"):
+        sc.detect(truth, run_streams(4, range(2), 0))
+
+
 def test_detection_probability_is_p_d():
     # one target, no clutter: the number of its detections is Binomial(K·M, P_D)
     p = 0.7

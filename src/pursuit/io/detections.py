@@ -515,7 +515,8 @@ def read_detections(
         raise ValueError(f"out_of_order: must be one of {', '.join(OUT_OF_ORDER)}, got {out_of_order!r}")
     try:
         with open(name, "rb") as fh:
-            items = list(read_detection_records(fh, fmt, columns, time_column=time_column, sensor_column=sensor_column, unterminated="hint"))
+            records = read_detection_records(fh, fmt, columns, time_column=time_column, sensor_column=sensor_column, unterminated="hint")
+            items = list(records)
     except OSError as e:
         raise DetectionFileError(name, None, "file", f"cannot read: {e.strerror or e}") from None
     if out_of_order == "sort":

@@ -58,7 +58,9 @@ def _rows_valid(name: str, z: np.ndarray, axes: str) -> np.ndarray:
     mixed = nan.any(axis=-1) & ~nan.all(axis=-1)
     if mixed.any():
         where = tuple(int(i) for i in np.argwhere(mixed)[0])
-        raise ValueError(f"{name}: row {where} ({axes[: axes.rfind(',')]}) is partly NaN; a row is a detection (all finite) or padding (all NaN)")
+        raise ValueError(
+            f"{name}: row {where} ({axes[: axes.rfind(',')]}) is partly NaN; a row is a detection (all finite) or padding (all NaN)"
+        )
     return present
 
 

@@ -28,14 +28,14 @@ components and its shuffle key.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np
 
 from .._validation import as_covariance, as_vector, in_range, nonnegative, positive, positive_int
-from ..models.measurement import LinearGaussian, RangeBearing
 from ..models.maneuver import ConstantTurn
+from ..models.measurement import LinearGaussian, RangeBearing
 from ..models.motion import ConstantVelocity
 from ..multitarget.detections import CLUTTER, PADDING, MultiTargetTruth, Scans
 from ..rng import RNGLike, RunStreams
@@ -188,7 +188,6 @@ class MultiTargetScenario:
     steps: int = 20
     dt: float = 1.0
     name: str = "multi-target"
-    _box: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "steps", positive_int("steps", self.steps))
@@ -299,6 +298,8 @@ class MultiTargetScenario:
     def detect(self, truth: MultiTargetTruth, rng: RNGLike) -> Scans:
         """Detections of ``truth`` (its runs must match ``rng``'s streams): P_D, noise, clutter, shuffling."""
         rng, runs = resolve_runs(rng, truth.runs)
+        if isinstance(rng, RunStreams) and len(rng) != truth.runs:
+            raise ValueError(f"rng: {len(rng)} streams for a truth of {truth.runs} runs; give one stream per run")
         K, M, N, _ = truth.states.shape
         m = self.measurement.dim
         z_scans, o_scans = [], []
@@ -368,7 +369,9 @@ def _check_target(t: Target, j: int, n: int, default: Any, steps: int) -> None:
     motions += [(f"legs[{i}].motion", leg.motion) for i, leg in enumerate(t.legs) if leg.motion is not None]
     for name, motion in motions:
         if _state_dim(motion, f"{where}.{name}") != n:
-            raise ValueError(f"{where}.{name}: state dimension {motion.dim} differs from the scenario's motion ({n}): one state layout for all targets")
+            raise ValueError(
+                f"{where}.{name}: state dimension {motion.dim} differs from the scenario's motion ({n}): one state layout for all targets"
+            )
     if t.x0.shape[0] != n:
         raise ValueError(f"{where}.x0: expected {n} state components, got {t.x0.shape[0]}")
     if t.anchor > t.birth and not hasattr(motions[0][1], "transition_matrix"):
