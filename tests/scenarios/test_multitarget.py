@@ -11,6 +11,7 @@ from pursuit.models import ConstantAcceleration, ConstantTurn, ConstantVelocity,
 from pursuit.multitarget import CLUTTER, PADDING
 from pursuit.rng import run_streams
 from pursuit.scenarios import Leg, MultiTargetScenario, Target, crossing, maneuvering_radar, williams15
+from pursuit.scenarios.multitarget import WILLIAMS15_GOSPA
 
 BUILT_INS = [crossing, williams15, maneuvering_radar]
 CV = ConstantVelocity(ndim=2, dt=1.0, q=0.01)
@@ -195,6 +196,7 @@ def test_williams15_numbers_from_the_matlab_code():
     np.testing.assert_allclose(sc.motion.cov(), np.kron(np.eye(2), Q1))
     np.testing.assert_allclose(sc.measurement.R, np.eye(2))
     np.testing.assert_array_equal(sc.clutter_region, [[0, 300], [0, 300]])
+    assert WILLIAMS15_GOSPA == {"c": 10.0, "p": 2.0, "alpha": 2.0}  # c_gospa = 10, p = 2, alpha = 2
     # TrajectoryWilliams15.m, scenario 1: t_birth = 1, t_death = [41, 82, 82, 82] (exists for birth <= k < death)
     M = 400
     truth, _ = sc.simulate_truth(run_streams(4, range(M), 0)), None

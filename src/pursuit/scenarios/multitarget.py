@@ -41,7 +41,7 @@ from ..multitarget.detections import CLUTTER, PADDING, MultiTargetTruth, Scans
 from ..rng import RNGLike, RunStreams
 from .base import resolve_runs
 
-__all__ = ["Leg", "Target", "MultiTargetScenario", "crossing", "williams15", "maneuvering_radar"]
+__all__ = ["Leg", "Target", "MultiTargetScenario", "crossing", "williams15", "maneuvering_radar", "WILLIAMS15_GOSPA"]
 
 
 def _step(name: str, value) -> int:
@@ -465,6 +465,10 @@ def crossing(*, clutter_rate: float = 5.0, p_detect: float = 0.9, steps: int = 2
 
 WILLIAMS15_STEPS = 81
 """Scans of the Williams 2015 scenario (``Nsteps`` in ScenarioWilliams15.m; odd, so that it has a midpoint)."""
+
+
+WILLIAMS15_GOSPA = {"c": 10.0, "p": 2.0, "alpha": 2.0}
+"""The GOSPA settings the MATLAB code scores the Williams 2015 scenario with (``c_gospa = 10``, p = 2, α = 2; 100 runs)."""
 
 
 def williams15(*, clutter_rate: float = 10.0, p_detect: float = 0.9) -> MultiTargetScenario:
