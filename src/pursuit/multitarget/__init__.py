@@ -4,6 +4,7 @@ Specification: ``docs/spec/05-multi-target-pmht.md`` (§1 detections, §4 tracke
 """
 
 from .association import jpda_marginals
+from .detections import CLUTTER, PADDING, MultiTargetTruth, Scans, pad_scans
 from .gnn import GNNTracker
 from .jpda import JPDATracker
 from .metrics import (
@@ -21,6 +22,11 @@ from .metrics import (
 from .tracking import MultiTrackResult, TrackerBase, track_scans
 
 __all__ = [
+    "CLUTTER",
+    "MultiTargetTruth",
+    "PADDING",
+    "Scans",
+    "pad_scans",
     "GNNTracker",
     "Gospa",
     "JPDATracker",
