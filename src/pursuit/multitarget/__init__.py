@@ -1,8 +1,12 @@
 """Multi-target tracking: detections, trackers and metrics, batched over Monte Carlo runs.
 
-Specification: ``docs/spec/05-multi-target-pmht.md §1``.
+Specification: ``docs/spec/05-multi-target-pmht.md`` (§1 detections, §4 trackers, §5 metrics).
 """
 
+from .association import jpda_marginals
+from .detections import CLUTTER, PADDING, MultiTargetTruth, Scans, pad_scans
+from .gnn import GNNTracker
+from .jpda import JPDATracker
 from .metrics import (
     Gospa,
     RunAverage,
@@ -15,16 +19,28 @@ from .metrics import (
     track_counts,
     track_switches,
 )
+from .tracking import MultiTrackResult, TrackerBase, track_scans
 
 __all__ = [
+    "CLUTTER",
+    "MultiTargetTruth",
+    "PADDING",
+    "Scans",
+    "pad_scans",
+    "GNNTracker",
     "Gospa",
+    "JPDATracker",
+    "MultiTrackResult",
     "RunAverage",
     "TrackCounts",
+    "TrackerBase",
     "gospa",
     "gospa_assignment",
     "gospa_summary",
+    "jpda_marginals",
     "ospa",
     "run_average",
     "track_counts",
+    "track_scans",
     "track_switches",
 ]

@@ -1,0 +1,285 @@
+"""The multi-target tracker base, the driver over scans and its result.
+
+A tracker (:class:`pursuit.multitarget.GNNTracker`,
+:class:`pursuit.multitarget.JPDATracker`) is a frozen dataclass holding the
+per-track filter, the detection and clutter model, the gate and the track
+management parameters.  :func:`track_scans` runs it over a sequence of scans
+``z (K, M, D, m)`` for all Monte Carlo runs at once; the only Python loop is
+the one over scans (plus, inside GNN and JPDA, a loop over the runs or
+clusters where an assignment must be solved).  Per scan:
+
+1. every (track, detection) hypothesis is evaluated with one ``step`` call
+   (:func:`pursuit.multitarget.association.evaluate_hypotheses`) and gated;
+2. the tracker associates and gives each track its posterior and a hit flag;
+3. the counters confirm and delete tracks
+   (:func:`pursuit.multitarget.management.update_counts`);
+4. detections no track gated start tentative tracks with those of the
+   previous scan (:func:`pursuit.multitarget.management.initiate`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from .._validation import as_float_array, in_range, positive, positive_int
+from ..gaussian import Gaussian
+from ..rng import RNGLike
+from .association import Hypotheses, evaluate_hypotheses, log_weights
+from .management import detection_positions, initiate, new_table, update_counts
+
+__all__ = ["TrackerBase", "MultiTrackResult", "track_scans"]
+
+
+def _layout_motion(filt: Any) -> Any:
+    """The motion model whose state the tracks carry: the filter's, or an IMM's first mode without maps."""
+    motion = getattr(filt, "motion", None)
+    if motion is None and hasattr(filt, "filters") and all(m is None for m in getattr(filt, "maps", (None,))):
+        motion = getattr(filt.filters[0], "motion", None)
+    return motion
+
+
+def _layout_measurement(filt: Any) -> Any:
+    """The filter's measurement model, or an IMM's first mode's (the modes share the sensor)."""
+    measurement = getattr(filt, "measurement", None)
+    if measurement is None and hasattr(filt, "filters"):
+        measurement = getattr(filt.filters[0], "measurement", None)
+    return measurement
+
+
+@dataclass(frozen=True)
+class TrackerBase:
+    """What GNN and JPDA share: the per-track filter, the detection model, the gate, track management.
+
+    Parameters
+    ----------
+    filter
+        The per-track filter: any pursuit Gaussian filter (KF, EKF, UKF,
+        CKF) or an IMM of them, with its motion and measurement models.
+    p_detect
+        Detection probability P_D in (0, 1].
+    clutter_density
+        λ: expected false alarms per scan per unit volume of measurement
+        space (> 0), e.g. 10 / (300 m × 300 m).
+    gate
+        χ² gate probability P_G in (0, 1), keyword only (default 0.99).
+    capacity
+        L, track slots per run (keyword only, default 32).
+    confirm
+        (M, N): a tentative track is confirmed after M hits in the N scans
+        after its initiation (keyword only, default (2, 3)).
+    max_misses
+        Consecutive misses that delete a track (keyword only, default 3).
+    max_speed
+        Largest target speed, for two-point initiation (keyword only).
+        None (the default): no tracks are started from detections; tracks
+        come only from the ``initial`` tracks given to :func:`track_scans`.
+    position
+        ``position(z (*b, m)) -> (p (*b, d), C (*b, d, d))``, a detection's
+        position and covariance for initiation (keyword only; default: the
+        built-in position and range-bearing sensors, see
+        :func:`pursuit.multitarget.management.detection_positions`).
+    name
+        Label in results (keyword only).
+    """
+
+    filter: Any
+    p_detect: float
+    clutter_density: float
+    gate: float = field(default=0.99, kw_only=True)
+    capacity: int = field(default=32, kw_only=True)
+    confirm: tuple[int, int] = field(default=(2, 3), kw_only=True)
+    max_misses: int = field(default=3, kw_only=True)
+    max_speed: float | None = field(default=None, kw_only=True)
+    position: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = field(default=None, kw_only=True)
+    name: str = field(default="", kw_only=True)
+
+    def __post_init__(self) -> None:
+        if not (callable(getattr(self.filter, "init", None)) and callable(getattr(self.filter, "step", None))):
+            raise TypeError(f"filter: {type(self.filter).__name__} is not a filter (needs init and step)")
+        in_range("p_detect", self.p_detect, 0.0, 1.0, low_open=True)
+        positive("clutter_density", self.clutter_density)
+        in_range("gate", self.gate, 0.0, 1.0, low_open=True, high_open=True)
+        positive_int("capacity", self.capacity)
+        positive_int("max_misses", self.max_misses)
+        if len(tuple(self.confirm)) != 2:
+            raise ValueError(f"confirm: expected (M, N), got {self.confirm!r}")
+        m_hits, n_scans = (positive_int("confirm", v) for v in self.confirm)
+        if m_hits > n_scans:
+            raise ValueError(f"confirm: M must not exceed N, got {self.confirm!r}")
+        object.__setattr__(self, "confirm", (m_hits, n_scans))
+        if self.max_speed is not None:
+            positive("max_speed", self.max_speed)
+            motion = _layout_motion(self.filter)
+            if motion is None or not hasattr(motion, "position_indices"):
+                raise ValueError("filter: initiation (max_speed) needs a motion model with position_indices")
+            if self.position is None:
+                to_position = detection_positions(_layout_measurement(self.filter), motion)
+                if to_position is None:
+                    raise ValueError(
+                        "position: give a function from a detection to a position and covariance; the measurement "
+                        "model is neither a position fix of the motion model's positions nor a range-bearing sensor"
+                    )
+                object.__setattr__(self, "position", to_position)
+            elif not callable(self.position):
+                raise ValueError("position: expected a function z -> (position, covariance)")
+        if not self.name:
+            object.__setattr__(self, "name", f"{type(self).__name__.removesuffix('Tracker')}-{getattr(self.filter, 'name', '')}")
+
+    def associate(self, hyp: Hypotheses, log_g: np.ndarray) -> tuple[Any, np.ndarray]:
+        """Each track's posterior (batch ``(M, L)``) and hit flag ``(M, L)`` from the scan's hypotheses."""
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class MultiTrackResult:
+    """Tracks over time, for all runs.
+
+    Attributes
+    ----------
+    mean
+        ``(K, M, L, n)`` track estimates after each scan (NaN in free slots).
+    cov
+        ``(K, M, L, n, n)`` their covariances (NaN in free slots).
+    label
+        ``(K, M, L)`` persistent track labels (per run), −1 for a free slot.
+    confirmed
+        ``(K, M, L)`` the slot holds a confirmed track.
+    dropped
+        ``(K, M)`` new tracks dropped for want of a free slot.
+    name
+        The tracker's name.
+    """
+
+    mean: np.ndarray
+    cov: np.ndarray
+    label: np.ndarray
+    confirmed: np.ndarray
+    dropped: np.ndarray
+    name: str = ""
+
+    @property
+    def steps(self) -> int:
+        """K."""
+        return self.mean.shape[0]
+
+    @property
+    def runs(self) -> int:
+        """M."""
+        return self.mean.shape[1]
+
+    @property
+    def capacity(self) -> int:
+        """L."""
+        return self.mean.shape[2]
+
+    def positions(self, indices: Any, confirmed_only: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Track positions ``(K, M, L, d)`` and their mask ``(K, M, L)``, the layout of the metrics.
+
+        ``indices`` are the position components of the state (e.g. the
+        motion model's ``position_indices``).
+        """
+        mask = self.confirmed if confirmed_only else self.label >= 0
+        return self.mean[..., list(indices)], mask
+
+
+def _as_initial(initial: Any, runs: int, capacity: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Given tracks ``(L0, n)`` or ``(M, L0, n)`` as full ``(M, L, n)`` and ``(M, L, n, n)`` arrays."""
+    g = initial if isinstance(initial, Gaussian) else Gaussian(*initial)
+    mean = g.mean if g.mean.ndim == 3 else np.broadcast_to(g.mean, (runs, *g.mean.shape[-2:]))
+    if mean.ndim != 3 or mean.shape[0] != runs:
+        raise ValueError(f"initial: expected a mean of shape (L0, n) or ({runs}, L0, n), got {g.mean.shape}")
+    L0, n = mean.shape[1:]
+    if L0 > capacity:
+        raise ValueError(f"initial: {L0} tracks exceed the capacity of {capacity} slots")
+    cov = np.broadcast_to(g.cov, (runs, L0, n, n))
+    full_mean = np.zeros((runs, capacity, n))
+    full_cov = np.broadcast_to(np.eye(n), (runs, capacity, n, n)).copy()
+    full_mean[:, :L0] = mean
+    full_cov[:, :L0] = cov
+    return full_mean, full_cov, L0
+
+
+def track_scans(
+    tracker: TrackerBase, z: Any, *, initial: Any = None, times: Any = None, rng: RNGLike = None
+) -> MultiTrackResult:
+    """Run a multi-target tracker over scans of detections, for all runs at once.
+
+    Parameters
+    ----------
+    tracker
+        A :class:`TrackerBase` subclass (GNN, JPDA).
+    z
+        ``(K, M, D, m)`` detections; NaN rows are padding (a row is either
+        all finite or all NaN); the order of rows carries no meaning.
+    initial
+        Tracks known before the first scan, as a :class:`pursuit.Gaussian`
+        (or ``(mean, cov)``) with mean ``(L0, n)`` or ``(M, L0, n)``: they take
+        slots 0..L0−1, confirmed, labels 0..L0−1.  Default: none.
+    times
+        ``(K,)`` scan times; the step from scan k−1 to k uses their
+        difference.  Default: the motion model's own ``dt`` (and the first
+        scan is always one model ``dt`` after ``initial``).
+    rng
+        Passed to the filter's ``init``; Gaussian filters draw nothing.
+
+    Returns
+    -------
+    MultiTrackResult
+    """
+    z = np.asarray(z, dtype=float)
+    if z.ndim != 4:
+        raise ValueError(f"z: expected detections of shape (K, M, D, m), got {z.shape}")
+    if np.isinf(z).any():
+        raise ValueError("z: detections must be finite or NaN (padding)")
+    nan = np.isnan(z)
+    if (nan.any(axis=-1) != nan.all(axis=-1)).any():
+        raise ValueError("z: a detection row must be all finite or all NaN (padding)")
+    K, M, D, m = z.shape
+    L = tracker.capacity
+    filt = tracker.filter
+    motion = _layout_motion(filt)
+    if times is not None:
+        times = as_float_array("times", times)
+        if times.shape != (K,) or np.any(np.diff(times) <= 0):
+            raise ValueError(f"times: expected {K} increasing scan times, got shape {times.shape}")
+    model_dt = getattr(motion, "dt", None)
+    if tracker.max_speed is not None and times is None and model_dt is None:
+        raise ValueError("times: initiation needs scan times when the motion model has no dt")
+
+    if initial is not None:
+        mean, cov, L0 = _as_initial(initial, M, L)
+    else:
+        n = getattr(motion, "dim", None)
+        if n is None:
+            raise ValueError("initial: give initial tracks, or a filter whose motion model has dim")
+        mean, cov, L0 = np.zeros((M, L, int(n))), np.broadcast_to(np.eye(int(n)), (M, L, int(n), int(n))).copy(), 0
+    n = mean.shape[-1]
+    parking = filt.init(Gaussian(np.zeros((M, L, n)), np.broadcast_to(np.eye(n), (M, L, n, n))), batch=(M, L), rng=rng)
+    table = new_table(filt.init(Gaussian(mean, cov), batch=(M, L), rng=rng), M, L, L0)
+
+    out_mean = np.full((K, M, L, n), np.nan)
+    out_cov = np.full((K, M, L, n, n), np.nan)
+    out_label = np.full((K, M, L), -1, dtype=np.int64)
+    out_conf = np.zeros((K, M, L), dtype=bool)
+    out_drop = np.zeros((K, M), dtype=np.int64)
+    for k in range(1, K + 1):
+        dt = None if times is None or k == 1 else float(times[k - 1] - times[k - 2])
+        zk = z[k - 1]
+        hyp = evaluate_hypotheses(filt, table.state, zk, table.alive, tracker.gate, k, dt)
+        log_g = log_weights(hyp, tracker.p_detect, tracker.clutter_density, tracker.gate)
+        state, hit = tracker.associate(hyp, log_g)
+        table = update_counts(table, state, hit & table.alive, parking, tracker.confirm, tracker.max_misses)
+        if tracker.max_speed is not None:
+            unused = hyp.detected & ~hyp.gated.any(axis=1)
+            step_dt = dt if dt is not None else model_dt  # None only at the first scan, which pairs nothing
+            table = initiate(table, filt, zk, unused, tracker.position, motion, tracker.max_speed, step_dt, rng)
+        alive = table.alive
+        out_mean[k - 1] = np.where(alive[..., None], table.state.mean, np.nan)
+        out_cov[k - 1] = np.where(alive[..., None, None], table.state.cov, np.nan)
+        out_label[k - 1] = table.label
+        out_conf[k - 1] = table.confirmed
+        out_drop[k - 1] = table.dropped
+    return MultiTrackResult(out_mean, out_cov, out_label, out_conf, out_drop, tracker.name)
