@@ -46,8 +46,15 @@ CATALOG: dict[str, list[tuple[str, str]]] = {
     'scenario': [
         ('cv-position', 'Constant-velocity target in 1-3 D with linear position measurements (KF-exact reference)'),
         ('maneuver-3d', 'Target maneuvering on a schedule of accelerations and turns in up to 3 axes, position measured per axis; state [x, vx, ax, ...]'),
+        ('mt-crossing', "Two 2-D constant-velocity targets crossing in clutter, position fixes (Stone Soup tutorials' set-up)"),
+        ('mt-maneuvering', 'Maneuvering targets at radar scale (turns, accelerations), range-bearing radar, clutter'),
+        ('mt-williams', 'Williams (2015): four 2-D CV targets that meet mid-scenario, 10 false alarms per scan over 300 m x 300 m, 81 scans'),
         ('underwater-toa', 'Underwater TOA positioning with an L-shaped three-hydrophone array (Ma & Zheng 2022); conditions ideal, actual, abnormal'),
         ('ungm', 'Univariate nonstationary growth model, the classic nonlinear benchmark (Gordon, Salmond & Smith 1993); state [x]'),
         ('wsn-range', '2-D constant-velocity target ranged by fixed WSN anchors; state [x, vx, y, vy]'),
+    ],
+    'tracker': [
+        ('gnn', 'Global nearest neighbour: 2-D assignment per scan within a chi-square gate'),
+        ('jpda', 'Joint probabilistic data association: exact joint events within clusters, moment-matched update'),
     ],
 }

@@ -167,3 +167,14 @@ def test_irregular_scan_times_step_with_their_differences():
     assert (res.label[1:, 0] >= 0).sum(axis=-1).tolist() == [1, 1, 1, 1]
     slot = int(np.nonzero(res.label[-1, 0] >= 0)[0][0])
     np.testing.assert_allclose(res.mean[-1, 0, slot], [6.0, 1.0, 3.0, 0.5], atol=1e-4)
+
+
+def test_a_particle_filter_is_refused_as_per_track_filter():
+    from pursuit.filters import BootstrapParticleFilter
+    from pursuit.models import ConstantVelocity, LinearGaussian
+    from pursuit.multitarget import GNNTracker, JPDATracker
+
+    pf = BootstrapParticleFilter(ConstantVelocity(ndim=2), LinearGaussian.position(4, (0, 2), 1.0), particles=10)
+    for cls in (GNNTracker, JPDATracker):
+        with pytest.raises(ValueError, match="filter: BootstrapParticleFilter cannot be a per-track filter"):
+            cls(pf, 0.9, 1e-3)

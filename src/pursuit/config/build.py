@@ -22,8 +22,12 @@ PAPER_PARAMS = (
 )
 
 
-def build_scenario(sections: dict[str, Any]) -> Any:
-    """Build the ``[scenario]`` table through the registry."""
+def build_scenario(sections: dict[str, Any], *, multi_target: bool = False) -> Any:
+    """Build the ``[scenario]`` table through the registry.
+
+    A multi-target scenario (``mt-*``) is refused unless ``multi_target``
+    (the ``multitarget`` kind), and the other way round, naming the field.
+    """
     table = sections.get("scenario")
     if table is None:
         raise ValueError("scenario: required section is missing")
@@ -34,6 +38,13 @@ def build_scenario(sections: dict[str, Any]) -> Any:
     if kind is None:
         raise ValueError("scenario.type: required (see `pursuit list`)")
     comp = registry.get("scenario", kind, "scenario.type")
+    is_multi = comp.target is not None and comp.target.__name__ == "MultiTargetScenario"
+    if is_multi and not multi_target:
+        raise ValueError(f"scenario.type: {kind!r} is a multi-target scenario; use it with kind = \"multitarget\"")
+    if multi_target and not is_multi:
+        raise ValueError(
+            f"scenario.type: the multitarget kind needs a multi-target scenario (mt-crossing, mt-williams, mt-maneuvering), got {kind!r}"
+        )
     return comp.build(where="scenario", **comp.resolve(values, "scenario"))
 
 

@@ -124,6 +124,8 @@ def _build_tracker(cls, scenario: Any, where: str, *, filter: dict[str, Any], p_
         raise ValueError(f"{where}.clutter_density: must be positive (the scenario has no clutter: set a small density)")
     if max_speed is None:
         max_speed = scenario.max_speed
+        if max_speed is None:
+            raise ValueError(f"{where}.max_speed: required (the scenario states no largest target speed)")
     return _checked(where, lambda: cls(filt, p_detect, clutter_density, max_speed=max_speed, **kw))
 
 

@@ -201,9 +201,7 @@ def _multitarget(sections: dict[str, Any], path: Path, name: str) -> MultiTarget
     for key in sections:
         if key not in _KNOWN_SECTIONS:
             raise ValueError(f"{key}: unknown section (known: experiment, {', '.join(sorted(_KNOWN_SECTIONS))})")
-    scenario = build_scenario(sections)
-    if not isinstance(scenario, MultiTargetScenario):
-        raise ValueError("scenario.type: the multitarget kind needs a multi-target scenario (mt-crossing, mt-williams, mt-maneuvering)")
+    scenario = build_scenario(sections, multi_target=True)
     trackers = build_trackers(sections, scenario)
     metrics = resolve_section(sections, "metrics", METRIC_PARAMS)
     figure_opts = resolve_section(sections, "figures", FIGURE_PARAMS)

@@ -25,12 +25,17 @@ from typing import Any, Callable
 import numpy as np
 
 from .._validation import as_float_array, in_range, positive, positive_int
+from ..filters.gaussian import CubatureKalmanFilter, ExtendedKalmanFilter, UnscentedKalmanFilter
+from ..filters.imm import InteractingMultipleModel
 from ..gaussian import Gaussian
 from ..rng import RNGLike
 from .association import Hypotheses, evaluate_hypotheses, log_weights
 from .management import detection_positions, initiate, new_table, update_counts
 
 __all__ = ["TrackerBase", "MultiTrackResult", "track_scans"]
+
+# what the hypothesis evaluation and the JPDA moment matching need: a Gaussian state (mean, cov) per track
+_PER_TRACK_FILTERS = (ExtendedKalmanFilter, UnscentedKalmanFilter, CubatureKalmanFilter, InteractingMultipleModel)
 
 
 def _layout_motion(filt: Any) -> Any:
@@ -99,6 +104,12 @@ class TrackerBase:
     def __post_init__(self) -> None:
         if not (callable(getattr(self.filter, "init", None)) and callable(getattr(self.filter, "step", None))):
             raise TypeError(f"filter: {type(self.filter).__name__} is not a filter (needs init and step)")
+        if not isinstance(self.filter, _PER_TRACK_FILTERS):
+            raise ValueError(
+                f"filter: {type(self.filter).__name__} cannot be a per-track filter; the trackers combine Gaussian "
+                "hypotheses: use a KalmanFilter, ExtendedKalmanFilter, UnscentedKalmanFilter, CubatureKalmanFilter "
+                "or an InteractingMultipleModel of them"
+            )
         in_range("p_detect", self.p_detect, 0.0, 1.0, low_open=True)
         positive("clutter_density", self.clutter_density)
         in_range("gate", self.gate, 0.0, 1.0, low_open=True, high_open=True)

@@ -6,6 +6,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from .figures import legend_beside
 
@@ -41,6 +42,7 @@ def gospa_over_time(summaries: Mapping[str, Mapping[str, Any]], times: np.ndarra
             top.fill_between(t, lo, hi, color=line.get_color(), alpha=0.15, linewidth=0)
     c, p, a = metrics["c"], metrics["p"], metrics["alpha"]
     top.set_ylabel("GOSPA (distance)")
+    top.set_xlabel("time (s)")
     top.set_title(f"GOSPA per scan, mean over runs with 95 % band (c = {c:g}, p = {p:g}, α = {a:g})", fontsize=10)
     top.set_ylim(bottom=0)
     top.grid(alpha=0.3)
@@ -50,6 +52,7 @@ def gospa_over_time(summaries: Mapping[str, Mapping[str, Any]], times: np.ndarra
             ax.plot(t, s[key].per_scan, color=colors[name])
         ax.set_title(title, fontsize=9)
         ax.set_xlabel("time (s)")
+        ax.xaxis.set_major_locator(MaxNLocator(4))
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
     parts[0].set_ylabel(f"part (distance^{p:g})")
@@ -74,10 +77,22 @@ def scene(
     neither, they are left out (the panel says so).
     """
     names = list(results)
-    fig = Figure(figsize=(4.6 * len(names) + 1.2, 4.8), layout="constrained")
-    axes = fig.subplots(1, len(names), sharex=True, sharey=True, squeeze=False)[0]
     i, j = (int(v) for v in list(position_indices)[:2])
     tpos = truth.states[:, run][..., [i, j]]  # (K, N, 2), NaN where absent
+    # the view is the truth's box with a margin: clutter far from the targets would shrink them to a dot
+    pts = tpos.reshape(-1, 2)
+    pts = pts[np.isfinite(pts).all(axis=-1)]
+    view = None
+    aspect = 1.0
+    if pts.size:
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        pad = 0.15 * float(np.max(hi - lo)) + 1.0
+        view = (lo - pad, hi + pad)
+        aspect = float((view[1][1] - view[0][1]) / (view[1][0] - view[0][0]))
+    panel = 4.6
+    height = float(np.clip(panel * aspect + 1.3, 3.4, 6.5))
+    fig = Figure(figsize=(panel * len(names) + 1.2, height), layout="constrained")
+    axes = fig.subplots(1, len(names), sharex=True, sharey=True, squeeze=False)[0]
     z = scans.z[:, run]  # (K, D, m)
     det = None
     if z.shape[-1] == 2 and to_position is None:
@@ -117,10 +132,13 @@ def scene(
             ax.annotate(str(int(label)), pts[-1], fontsize=7, color=color, xytext=(3, 3), textcoords="offset points")
         ax.set_title(f"{name}: {len(labels)} confirmed tracks", fontsize=10)
         ax.set_xlabel("x (m)")
-        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_aspect("equal", adjustable="box")
         ax.grid(alpha=0.3)
         if det is None:
             ax.text(0.02, 0.02, "detections not drawn (not position fixes)", transform=ax.transAxes, fontsize=7)
+    if view is not None:
+        axes[0].set_xlim(view[0][0], view[1][0])
+        axes[0].set_ylim(view[0][1], view[1][1])
     axes[0].set_ylabel("y (m)")
     legend_beside(axes[-1])
     fig.suptitle(f"{title_prefix + ': ' if title_prefix else ''}run {run}, truth, detections and labelled tracks", fontsize=11)

@@ -177,6 +177,9 @@ class MultiTargetScenario:
         Scan interval, s (scan k is at time k·dt).
     name
         The scenario's name.
+    max_speed
+        The largest target speed a tracker should expect (position units per
+        second), for two-point track initiation; None: not stated.
     """
 
     targets: Sequence[Target]
@@ -188,8 +191,11 @@ class MultiTargetScenario:
     steps: int = 20
     dt: float = 1.0
     name: str = "multi-target"
+    max_speed: float | None = None
 
     def __post_init__(self) -> None:
+        if self.max_speed is not None:
+            object.__setattr__(self, "max_speed", positive("max_speed", self.max_speed))
         object.__setattr__(self, "steps", positive_int("steps", self.steps))
         object.__setattr__(self, "dt", positive("dt", self.dt))
         object.__setattr__(self, "p_detect", in_range("p_detect", self.p_detect, 0.0, 1.0))
@@ -459,7 +465,8 @@ def crossing(*, clutter_rate: float = 5.0, p_detect: float = 0.9, steps: int = 2
     sensor = LinearGaussian.position(4, (0, 2), math.sqrt(0.75))
     targets = (Target([0.0, 1.0, 0.0, 1.0]), Target([0.0, 1.0, 20.0, -1.0]))
     return MultiTargetScenario(
-        targets, motion, sensor, [[-10.0, 30.0], [-10.0, 30.0]], clutter_rate, p_detect, steps, 1.0, "mt-crossing"
+        targets, motion, sensor, [[-10.0, 30.0], [-10.0, 30.0]], clutter_rate, p_detect, steps, 1.0, "mt-crossing",
+        max_speed=5.0,
     )
 
 
@@ -505,7 +512,8 @@ def williams15(*, clutter_rate: float = 10.0, p_detect: float = 0.9) -> MultiTar
     deaths = (mid, None, None, None)
     targets = tuple(Target(centre, 1, d, spread=0.1 * np.eye(4), anchor=mid) for d in deaths)
     return MultiTargetScenario(
-        targets, motion, sensor, [[0.0, 300.0], [0.0, 300.0]], clutter_rate, p_detect, WILLIAMS15_STEPS, 1.0, "mt-williams15"
+        targets, motion, sensor, [[0.0, 300.0], [0.0, 300.0]], clutter_rate, p_detect, WILLIAMS15_STEPS, 1.0, "mt-williams15",
+        max_speed=5.0,
     )
 
 
@@ -544,4 +552,6 @@ def maneuvering_radar(*, clutter_rate: float = 20.0, p_detect: float = 0.9) -> M
     )
     radar = RangeBearing(np.zeros(2), 20.0, 0.002)
     region = [[2_000.0, 30_000.0], [0.0, math.pi / 2]]
-    return MultiTargetScenario(targets, motion, radar, region, clutter_rate, p_detect, 100, dt, "mt-maneuvering-radar")
+    return MultiTargetScenario(
+        targets, motion, radar, region, clutter_rate, p_detect, 100, dt, "mt-maneuvering-radar", max_speed=400.0
+    )
