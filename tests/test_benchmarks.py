@@ -82,3 +82,14 @@ def test_upf_benchmark_quick_mode():
     assert proc.returncode == 0, proc.stderr
     for row in ("| bootstrap PF | numpy |", "| UPF l = 1 | numpy |", "| bootstrap PF | numba |", "| UPF l = 0.1 | numba |"):
         assert row in proc.stdout
+
+
+def test_multi_target_benchmark_quick_mode():
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "run.py"), "--quick", "--only", "mt"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "| pursuit GNN | 10 |" in proc.stdout and "| pursuit JPDA | 10 |" in proc.stdout
