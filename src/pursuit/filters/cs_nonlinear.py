@@ -283,9 +283,13 @@ class NonlinearCSFilter(FilterBase):
         else:
             meas0 = self._inner._measure(x0, P0, k)
             _, _, info0 = _update(x0, P0, z, valid, meas0, self.measurement, k)
-            D = np.asarray(info0["nis"], dtype=float)
-            detect = (info0["dof"] > 0) & (D > self.threshold)
             nu = np.where(valid, info0["innovation"], 0.0)
+            # D = νᵀ S0⁻¹ ν, solved per run: the shared update's NIS (a batched quadratic form) may
+            # differ in the last bit with the batch size, and D decides the adaptation.
+            S0 = np.broadcast_to(info0["S"], (*batch, m, m))
+            D = np.sum(nu * np.linalg.solve(S0, nu[..., None])[..., 0], axis=-1)
+            D = np.where(info0["dof"] > 0, D, np.nan)
+            detect = (info0["dof"] > 0) & (D > self.threshold)
             V_old = state.memory["V"]
             nn = nu[..., :, None] * nu[..., None, :]
             V = np.where(np.isnan(V_old), nn, (self.rho * V_old + nn) / (1.0 + self.rho))
