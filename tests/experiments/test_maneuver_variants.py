@@ -30,7 +30,7 @@ def test_p4_bearings_reproduces_with_a_verdict_per_claim(tmp_path, capsys):
     assert (folder / "figures" / "rmse_z-strong-3-D.png").exists()
     with (folder / "rmse-strong-3-D.csv").open() as fh:
         names = {r["filter"] for r in csv.DictReader(fh)}
-    assert names == {"CS-EKF", "CS-EKF-2", "ACS-EKF", "ACS-UKF", "APCS-EKF", "IMM-Singer"}
+    assert names == {"CS-EKF", "CS-EKF-2", "ACS-EKF", "ACS-UKF", "IMM-Singer"}
 
 
 def test_paired_log_ratio_interval_against_a_hand_computation():

@@ -224,7 +224,7 @@ def detection_table(result: MonteCarloResult, filters: list[Any], maneuvering: n
         det = result.filters[f.name].info["maneuver"]  # (K, M, A)
         n_q = int(settled.sum()) * result.runs
         fired = int(det[np.broadcast_to(settled[:, None, :], det.shape)].sum())
-        p = float(stats.chi2.sf(getattr(f, "threshold", np.nan), 1))
+        p = float(stats.chi2.sf(getattr(f, "threshold", np.nan), getattr(f, "detection_dof", 1)))
         rate = fired / n_q if n_q else float("nan")
         lo, hi = (stats.binom.ppf([0.025, 0.975], n_q, rate) / n_q) if n_q else (np.nan, np.nan)
         on_rate = float(det[np.broadcast_to(onset[:, None, :], det.shape)].mean()) if onset.any() else float("nan")
@@ -234,7 +234,8 @@ def detection_table(result: MonteCarloResult, filters: list[Any], maneuvering: n
         f"Maneuver detector: rate on settled non-maneuvering steps (>= {SETTLE_STEPS} steps after a maneuver) and at onsets",
         ["filter", "configured_p", "quiet_rate", "quiet_rate_lo95", "quiet_rate_hi95", "quiet_trials", "onset_rate"],
         rows,
-        notes="configured_p = P{chi2(1) > M}; the detector is exact only when the nominal model matches the target.",
+        notes="configured_p = P{chi2(m) > M}, m the dimension of the residual tested (1 per axis; 2 for azimuth and elevation); "
+        "the detector is exact only when the nominal model matches the target.",
     )
 
 
@@ -456,7 +457,7 @@ class ManeuverPlan:
         modes = mode_probabilities(result, segs, labels)
         if modes is not None:
             figs["mode_probabilities"] = modes
-        p = {f.name: float(stats.chi2.sf(f.threshold, 1)) for f in filters if hasattr(f, "threshold")}
+        p = {f.name: float(stats.chi2.sf(f.threshold, getattr(f, "detection_dof", 1))) for f in filters if hasattr(f, "threshold")}
         rates = detection_rates(result, axes, segs, p)
         if rates is not None:
             figs["detections"] = rates

@@ -213,6 +213,11 @@ class NonlinearCSFilter(FilterBase):
         cls = ExtendedKalmanFilter if self.update == "ekf" else UnscentedKalmanFilter
         object.__setattr__(self, "_inner", cls(nominal, self.measurement, backend="numpy"))
 
+    @property
+    def detection_dof(self) -> int:
+        """Degrees of freedom of the residual statistic D: the measurement dimension m."""
+        return int(np.shape(self.measurement.cov(None))[-1])
+
     def _infer_axes(self) -> int:
         A = self.axes
         idx = getattr(self.measurement, "position_indices", None)
