@@ -45,3 +45,13 @@ def test_bad_parameters_name_the_field():
     for kw, field in [(dict(dims=4), "dims"), (dict(strength="mild"), "strength"), (dict(weave_amplitude=-1.0), "weave_amplitude")]:
         with pytest.raises(ValueError, match=f"^{field}:"):
             BearingsOnlyTarget(**kw)
+
+
+def test_the_measurement_uses_the_observer_track_in_closed_form():
+    sc = BearingsOnlyTarget(dims=3)
+    track = sc.observer_track()
+    for k in (1, 50, sc.steps):
+        np.testing.assert_allclose(sc.measurement.observer_at(k), track[k - 1], rtol=1e-14, atol=1e-9)
+    # a huge horizon stores nothing at construction (the engine's memory check refuses it later)
+    huge = BearingsOnlyTarget(horizon=10**15)
+    assert huge.measurement.steps is None

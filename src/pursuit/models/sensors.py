@@ -112,12 +112,14 @@ class ObserverBearings(_GaussianNoise):
     same wrap leaves them unchanged).  A bearings-only target is observable
     only from a maneuvering observer, so the observer's track is part of the
     model: row ``k − 1`` of ``observer`` is its position at step ``k``
-    (steps start at 1, as in :func:`pursuit.run`).
+    (steps start at 1, as in :func:`pursuit.run`), or ``observer(k)`` gives it.
 
     Parameters
     ----------
     observer
-        ``(K, d)`` observer positions, d = 2 or 3, for steps 1 … K.
+        ``(K, d)`` observer positions, d = 2 or 3, for steps 1 … K; or a
+        callable ``observer(k) -> (d,)`` for any step k ≥ 1 (a track known in
+        closed form, with no length to store).
     sigma
         Angle noise standard deviation (rad): one value, or one per angle.
     position_indices
@@ -132,12 +134,17 @@ class ObserverBearings(_GaussianNoise):
     R: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        obs = np.array(self.observer, dtype=float)
-        if obs.ndim != 2 or obs.shape[1] not in (2, 3) or obs.shape[0] < 1:
-            raise ValueError(f"observer: expected a (K, 2) or (K, 3) array of positions, got shape {obs.shape}")
-        if not np.all(np.isfinite(obs)):
-            raise ValueError("observer: positions must be finite")
-        d = obs.shape[1]
+        if callable(self.observer):
+            d = np.shape(self.observer(1))[-1] if np.ndim(self.observer(1)) == 1 else 0
+            if d not in (2, 3):
+                raise ValueError(f"observer: observer(k) must return a position of 2 or 3 coordinates, got {self.observer(1)!r}")
+        else:
+            obs = np.array(self.observer, dtype=float)
+            if obs.ndim != 2 or obs.shape[1] not in (2, 3) or obs.shape[0] < 1:
+                raise ValueError(f"observer: expected a (K, 2) or (K, 3) array of positions, got shape {obs.shape}")
+            if not np.all(np.isfinite(obs)):
+                raise ValueError("observer: positions must be finite")
+            d = obs.shape[1]
         idx = tuple(3 * i for i in range(d)) if self.position_indices is None else tuple(int(i) for i in self.position_indices)
         if len(idx) != d:
             raise ValueError(f"position_indices: expected {d} indices for a {d}-D observer, got {len(idx)}")
@@ -147,27 +154,30 @@ class ObserverBearings(_GaussianNoise):
             raise ValueError(f"sigma: expected 1 or {m} values, got {sig.shape[0]}")
         for s in sig:
             positive("sigma", s)
-        _freeze(self, "observer", obs)
+        if not callable(self.observer):
+            _freeze(self, "observer", obs)
         object.__setattr__(self, "position_indices", idx)
         self._set_noise(np.diag(np.broadcast_to(sig, (m,)) ** 2))
 
     @property
     def dim(self) -> int:
         """Number of angles: 1 (2-D) or 2 (3-D)."""
-        return self.observer.shape[1] - 1
+        return self.R.shape[0]
 
     @property
-    def steps(self) -> int:
-        """Number of steps the observer's track covers."""
-        return self.observer.shape[0]
+    def steps(self) -> int | None:
+        """Number of steps the observer's track covers (None for a callable track)."""
+        return None if callable(self.observer) else self.observer.shape[0]
 
     def observer_at(self, k: int | None) -> np.ndarray:
-        """The observer's position at step ``k`` (1 … K), ``(d,)``."""
+        """The observer's position at step ``k`` (≥ 1; at most K for a stored track), ``(d,)``."""
         if k is None:
             raise ValueError("k: the moving observer's angles need the step index")
         k = int(k)
-        if not 1 <= k <= self.steps:
-            raise ValueError(f"k: the observer's track covers steps 1 to {self.steps}, got {k}")
+        if k < 1 or (self.steps is not None and k > self.steps):
+            raise ValueError(f"k: the observer's track covers steps 1 to {self.steps or 'any'}, got {k}")
+        if callable(self.observer):
+            return np.asarray(self.observer(k), dtype=float)
         return self.observer[k - 1]
 
     def _deltas(self, x: np.ndarray, k: int | None) -> np.ndarray:

@@ -40,7 +40,7 @@ from ..rng import RNGLike, RunStreams, as_rng
 from .base import Simulation
 from .maneuver import Maneuver, ManeuveringTarget, parse_schedule
 
-__all__ = ["BearingsOnlyTarget", "STRONG_SCHEDULE", "WEAK_SCHEDULE"]
+__all__ = ["BearingsOnlyTarget", "WeavingObserver", "STRONG_SCHEDULE", "WEAK_SCHEDULE"]
 
 
 def _scaled(scale: float, shift: float = 40.0) -> tuple[Maneuver, ...]:
@@ -59,6 +59,26 @@ STRONG_SCHEDULE: tuple[Maneuver, ...] = _scaled(5.0)
 WEAK_SCHEDULE: tuple[Maneuver, ...] = _scaled(0.5)
 """[DEFAULT] weak maneuvers: the same segments at a tenth of the accelerations (y +2, −2, −1.5; x ±0.5; z −0.25 m/s²)."""
 _SCHEDULES = {"strong": STRONG_SCHEDULE, "weak": WEAK_SCHEDULE}
+
+
+@dataclass(frozen=True)
+class WeavingObserver:
+    """Observer position at filter step k: ``p0 + v t + A sin(2π t / P) e_x`` with ``t = (k + 2) dt``.
+
+    A closed form, so a scenario of any horizon stores no track (filter step k is epoch k + 2).
+    """
+
+    position: np.ndarray
+    velocity: np.ndarray
+    amplitude: float
+    period: float
+    dt: float
+
+    def __call__(self, k: int) -> np.ndarray:
+        t = (int(k) + 2) * self.dt
+        p = self.position + t * self.velocity
+        p[0] += self.amplitude * np.sin(2.0 * np.pi * t / self.period)
+        return p
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,7 +161,8 @@ class BearingsOnlyTarget:
         target = ManeuveringTarget(horizon=horizon, dt=self.dt, position=self.position, velocity=self.velocity, maneuvers=schedule)
         object.__setattr__(self, "_target", target)
         object.__setattr__(self, "motion", ConstantAcceleration(ndim=d, dt=self.dt, q=1.0, layout="axis"))
-        object.__setattr__(self, "measurement", ObserverBearings(self.observer_track(), self.sigma))
+        observer = WeavingObserver(self.observer_position, self.observer_velocity, amp, self.weave_period, self.dt)
+        object.__setattr__(self, "measurement", ObserverBearings(observer, self.sigma))
 
     # -- layout (as the maneuver scenario) ------------------------------------------
     @property
@@ -188,7 +209,7 @@ class BearingsOnlyTarget:
         return self._target.true_states()
 
     def observer_track(self) -> np.ndarray:
-        """Observer positions at the filter steps' times, ``(K, dims)``."""
+        """Observer positions at the filter steps' times, ``(K, dims)`` (what the measurement model uses)."""
         t = self.times
         track = self.observer_position + t[:, None] * self.observer_velocity
         track[:, 0] += self.weave_amplitude * np.sin(2.0 * np.pi * t / self.weave_period)
