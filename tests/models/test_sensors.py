@@ -149,3 +149,19 @@ def test_observer_angles_need_a_step_on_the_track():
         ObserverBearings(np.zeros((3, 3)), [0.1, 0.1, 0.1])
     with pytest.raises(ValueError, match="^position_indices:"):
         ObserverBearings(np.zeros((3, 3)), 0.1, position_indices=(0, 3))
+
+
+def test_an_ekf_with_observer_angles_and_numba_warns_and_computes_with_numpy():
+    # No compiled form of the moving observer's angles yet: the fallback names the sensor.
+    from pursuit.compute import CompiledBackendWarning
+    from pursuit.models import ConstantAcceleration, ObserverBearings
+
+    sensor = ObserverBearings(_observer(4, 2), 0.001)
+    motion = ConstantAcceleration(ndim=2, q=1.0, layout="axis")  # a motion model that compiles
+    with pytest.warns(CompiledBackendWarning, match="ObserverBearings"):
+        ekf = pu.ExtendedKalmanFilter(motion, sensor, backend="numba")
+    assert not ekf.compiled
+    ref = pu.ExtendedKalmanFilter(motion, sensor, backend="numpy")
+    prior = pu.Gaussian(np.array([5000.0, 0, 0, 5000.0, 0, 0]), np.eye(6) * 100.0)
+    zs = np.array([[0.78], [0.77], [0.79], [0.78]])
+    np.testing.assert_array_equal(pu.run(ekf, zs, prior).mean, pu.run(ref, zs, prior).mean)
