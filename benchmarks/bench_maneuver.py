@@ -13,6 +13,11 @@ Rows:
   of one, run after run (what a loop over runs would cost).
 * ``FilterPy IMM-Singer``: ``filterpy.kalman.IMMEstimator`` over three
   ``KalmanFilter`` objects with the same Singer F and Q, one run at a time.
+* ``pursuit ACS-EKF / ACS-UKF, bearings 3-D``: the joint CS-model filter
+  (``NonlinearCSFilter``, α and a_max adapted) on the ``bearings`` scenario
+  (azimuth and elevation, strong maneuvers, 138 steps), batched and one run at
+  a time.  NumPy only: there is no compiled path for it or for the moving
+  observer's angles.
 
 Run::
 
@@ -26,10 +31,11 @@ import numpy as np
 from _timing import median_time  # benchmarks/ is on sys.path when a benchmark runs as a script
 
 import pursuit as pu
-from pursuit.filters import AdaptiveCSFilter, CurrentStatisticalFilter, InteractingMultipleModel, ModifiedSingerFilter
+from pursuit.filters import AdaptiveCSFilter, CurrentStatisticalFilter, InteractingMultipleModel, ModifiedSingerFilter, NonlinearCSFilter
 from pursuit.models import Singer
 from pursuit.rng import run_streams
 from pursuit.scenarios import ManeuveringTarget
+from pursuit.scenarios.bearings import BearingsOnlyTarget
 
 REPEATS = 3
 SINGER_MODES = ((1 / 60, 5.0), (1 / 20, 20.0), (1 / 5, 60.0))
@@ -39,13 +45,19 @@ def _time(fn, repeats: int = REPEATS) -> float:
     return median_time(fn, repeats)
 
 
-def _work(runs: int):
-    sc = ManeuveringTarget()
+BEARINGS = ("ACS-EKF", "ACS-UKF")
+
+
+def _work(runs: int, name: str = ""):
+    sc = BearingsOnlyTarget(dims=3) if name in BEARINGS else ManeuveringTarget()
     return sc, sc.simulate(run_streams(0, range(runs), 0), runs)
 
 
 def _filters(sc):
     meas = sc.measurement
+    if isinstance(sc, BearingsOnlyTarget):
+        kw = dict(adaptation="limit", alpha0=0.05, a_max=2.0, a_max_cap=20.0, fading="none")
+        return {"ACS-EKF": NonlinearCSFilter(meas, **kw), "ACS-UKF": NonlinearCSFilter(meas, update="ukf", **kw)}
     return {
         "CS": CurrentStatisticalFilter(meas),
         "APCS": AdaptiveCSFilter(meas),
@@ -58,7 +70,7 @@ def _filters(sc):
 
 def pursuit_rate(name: str, runs: int) -> float:
     """Filter-steps per second, all runs in one batch."""
-    sc, sim = _work(runs)
+    sc, sim = _work(runs, name)
     filt = _filters(sc)[name]
     t = _time(lambda: pu.run(filt, sim.measurements, sim.prior, keep_cov=False))
     return runs * sc.steps / t
@@ -66,7 +78,7 @@ def pursuit_rate(name: str, runs: int) -> float:
 
 def pursuit_loop_rate(name: str, runs: int) -> float:
     """Filter-steps per second when the same filter is called one run at a time."""
-    sc, sim = _work(runs)
+    sc, sim = _work(runs, name)
     filt = _filters(sc)[name]
 
     def go():
@@ -116,6 +128,12 @@ def main(quick: bool = False) -> list[dict]:
     rows = []
     for name in ("CS", "APCS", "MS", "IMM-Singer"):
         rows.append({"implementation": f"pursuit {name}", "runs": runs, "rate": pursuit_rate(name, runs)})
+    steps_b = BearingsOnlyTarget(dims=3).steps
+    for name in BEARINGS:
+        rows.append({"implementation": f"pursuit {name}, bearings 3-D", "runs": runs, "steps": steps_b, "rate": pursuit_rate(name, runs)})
+    rows.append(
+        {"implementation": "pursuit ACS-EKF, bearings 3-D, one run at a time", "runs": loop_runs, "steps": steps_b, "rate": pursuit_loop_rate("ACS-EKF", loop_runs)}
+    )
     rows.append({"implementation": "pursuit APCS, one run at a time", "runs": loop_runs, "rate": pursuit_loop_rate("APCS", loop_runs)})
     rows.append({"implementation": "pursuit IMM-Singer, one run at a time", "runs": loop_runs, "rate": pursuit_loop_rate("IMM-Singer", loop_runs)})
     fp = filterpy_rate(loop_runs)
@@ -126,7 +144,7 @@ def main(quick: bool = False) -> list[dict]:
     for r in rows:
         ratio = f"{r['rate'] / fp:.1f}x" if fp else "n/a (filterpy not installed)"
         r["vs_filterpy"] = r["rate"] / fp if fp else None
-        print(f"| {r['implementation']} | {r['runs']} x 98 | {r['rate'] / 1e3:.1f} | {ratio} |")
+        print(f"| {r['implementation']} | {r['runs']} x {r.get('steps', 98)} | {r['rate'] / 1e3:.1f} | {ratio} |")
     return rows
 
 

@@ -17,6 +17,7 @@ from pursuit.filters import (
     CurrentStatisticalFilter,
     InteractingMultipleModel,
     ModifiedSingerFilter,
+    NonlinearCSFilter,
     kinematic_map,
 )
 from pursuit.filters.cuckoo import CSPF, ICSPF, CuckooSearch
@@ -24,6 +25,7 @@ from pursuit.filters.particle import BootstrapParticleFilter
 from pursuit.filters.upf import PartialUPF
 from pursuit.models import ConstantVelocity, Singer
 from pursuit.scenarios import LinearCV, ManeuveringTarget, WSNRange
+from pursuit.scenarios.bearings import BearingsOnlyTarget
 
 
 @dataclass(frozen=True)
@@ -64,6 +66,7 @@ class Case:
 LINEAR = LinearCV(ndim=2, steps=25, q=0.05, sigma=1.0)
 NONLINEAR = WSNRange(steps=25)
 MANEUVER = ManeuveringTarget(horizon=27, maneuvers=[{"axis": "y", "start": 10, "stop": 18, "accel": 40.0}])
+BEARINGS = BearingsOnlyTarget(dims=3, horizon=27, maneuvers=[{"axis": "y", "start": 10, "stop": 18, "accel": 10.0}])
 
 
 def _singer_kf(s, alpha, sigma):
@@ -103,6 +106,10 @@ CASES = [
         scenario=MANEUVER,
     ),
     Case("imm-cv-singer", _imm_cv_singer, exact_on_linear=False, scenario=MANEUVER),
+    # the joint CS-model filter on the per-axis scenario and on azimuth + elevation
+    Case("cs-nonlinear-apcs", lambda s: NonlinearCSFilter(s.measurement, dt=s.dt, adaptation="apcs"), exact_on_linear=False, scenario=MANEUVER),
+    Case("cs-nonlinear-ekf", lambda s: NonlinearCSFilter(s.measurement, dt=s.dt, alpha0=0.05, a_max=2.0, fading="stf"), exact_on_linear=False, scenario=BEARINGS),
+    Case("cs-nonlinear-ukf", lambda s: NonlinearCSFilter(s.measurement, dt=s.dt, update="ukf", alpha0=0.05, a_max=2.0, gate=0.99), exact_on_linear=False, scenario=BEARINGS),
     # χ² gates on the per-axis filters and on the IMM (a step with a rejected run re-runs the IMM's
     # modes for the whole batch: the other runs must not notice).  APCS and IMM-Singer adapt to
     # this scenario's maneuver, so only a tight gate (0.7) rejects some of their steps here.

@@ -78,7 +78,7 @@ MUTATIONS: list[tuple[tuple, Any, str]] = [
 ]
 
 # Filters that take `gate` (docs/configuration.md) and the particle filters.
-_GATED = ("kf", "ekf", "ukf", "ckf", "cs", "apcs", "ms", "singer", "imm", "imm-singer")
+_GATED = ("kf", "ekf", "ukf", "ckf", "cs", "apcs", "ms", "cs-nonlinear", "singer", "imm", "imm-singer")
 _PARTICLE = ("pf", "upf", "cs-pf", "ics-pf")
 # Columns that measure the machine, not the filters.
 _TIMING = ("time", "wall", "cost", "speed", "per_step_s", "seconds")

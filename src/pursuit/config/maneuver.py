@@ -16,7 +16,7 @@ from ..filters.cs import (
     CurrentStatisticalFilter,
     ModifiedSingerFilter,
 )
-from ..filters.gaussian import KalmanFilter
+from ..filters.gaussian import ExtendedKalmanFilter, KalmanFilter
 from ..filters.imm import InteractingMultipleModel
 from ..models import maneuver as mm
 from ..registry import Param, field_default, field_param, params_from, register
@@ -111,6 +111,22 @@ def _axes_of(scenario: Any, where: str) -> int:
     if H is None or H.shape[1] != 3 * H.shape[0]:
         raise ValueError(f"{where}.type: needs a scenario with a [p, v, a] state per measured axis (e.g. maneuver-3d)")
     return H.shape[0]
+
+
+def _singer_axes(scenario: Any, where: str) -> int:
+    """Axes of a [p, v, a]-per-axis scenario for the Singer filters: measured per axis, or nonlinear (bearings) with ``axes``."""
+    if callable(getattr(scenario.measurement, "matrix", None)):
+        return _axes_of(scenario, where)
+    axes = getattr(scenario, "axes", None)
+    if not axes or len(getattr(scenario, "state_labels", ())) != 3 * len(axes):
+        raise ValueError(f"{where}.type: needs a scenario with a [p, v, a] state per axis (e.g. maneuver-3d, bearings)")
+    return len(axes)
+
+
+def _singer_filter(model: Any, scenario: Any, **kw) -> Any:
+    """A Kalman filter for a linear measurement, an EKF for a nonlinear one (bearings)."""
+    cls = KalmanFilter if callable(getattr(scenario.measurement, "matrix", None)) else ExtendedKalmanFilter
+    return cls(model, scenario.measurement, **kw)
 
 
 @register(
@@ -231,16 +247,16 @@ _SINGER_PARAMS = (
 @register(
     "filter",
     "singer",
-    "Kalman filter with the Singer model on every axis",
+    "Kalman filter with the Singer model on every axis (an EKF for a nonlinear measurement such as bearings)",
     params=(Param("name", "str", "Singer", NAME.doc, own=True), *_SINGER_PARAMS, GATE),
     target=KalmanFilter,
 )
 def _singer(scenario, where="filter", *, name: str, alpha: float, sigma: float | None, a_max: float, p_max: float, p_zero: float, gate):
-    axes = _axes_of(scenario, where)
+    axes = _singer_axes(scenario, where)
     s = _singer_sigma(where, sigma, a_max, p_max, p_zero)
     return _reanchor(
         where,
-        lambda: KalmanFilter(mm.Singer(alpha=alpha, sigma=s, ndim=axes, dt=scenario.dt), scenario.measurement, name=name or "Singer", gate=gate),
+        lambda: _singer_filter(mm.Singer(alpha=alpha, sigma=s, ndim=axes, dt=scenario.dt), scenario, name=name or "Singer", gate=gate),
     )
 
 
@@ -269,7 +285,7 @@ _IMM_PARAMS = (
 @register(
     "filter",
     "imm-singer",
-    "IMM over Singer-model Kalman filters with different (alpha, sigma) (Tan et al.)",
+    "IMM over Singer-model Kalman filters (EKFs for bearings) with different (alpha, sigma) (Tan et al.)",
     params=(
         Param("name", "str", "IMM-Singer", NAME.doc, own=True),
         Param("models", "matrix", [[1 / 60, 5.0], [1 / 20, 20.0], [1 / 5, 60.0]], "one [alpha (1/s), sigma (m/s^2)] row per model", own=True),
@@ -278,7 +294,7 @@ _IMM_PARAMS = (
     target=InteractingMultipleModel,
 )
 def _imm_singer(scenario, where="filter", *, name: str, models, transition, initial_probs, gate):
-    axes = _axes_of(scenario, where)
+    axes = _singer_axes(scenario, where)
     rows = np.atleast_2d(np.asarray(models, dtype=float))
     if rows.ndim != 2 or rows.shape[1] != 2:
         raise ValueError(f"{where}.models: expected rows [alpha, sigma], got shape {rows.shape}")
@@ -287,7 +303,7 @@ def _imm_singer(scenario, where="filter", *, name: str, models, transition, init
         model = _reanchor(f"{where}.models[{i}]", lambda: mm.Singer(alpha=a, sigma=s, ndim=axes, dt=scenario.dt))
         # the mode's name in legends: the time constant reads better than α = 0.0166667 (1/s)
         label = f"Singer τ = {1 / a:.3g} s, σ = {s:.3g} m/s²" if a > 0 else f"Singer α = 0, σ = {s:.3g} m/s²"
-        filters.append(KalmanFilter(model, scenario.measurement, name=label))
+        filters.append(_singer_filter(model, scenario, name=label))
     return _reanchor(where, lambda: InteractingMultipleModel(filters, transition, initial_probs, name=name or "IMM-Singer", gate=gate))
 
 

@@ -1,7 +1,25 @@
 """The ``maneuver`` experiment kind: per-axis RMSE of maneuvering-target filters (paper P4).
 
 Sections: ``[scenario]`` (a scenario with ``[p, v, a]`` per axis, e.g.
-``maneuver-3d``), ``[[filters]]``, optional ``[figures]`` and ``[claims]``.
+``maneuver-3d`` or ``bearings``), ``[[filters]]``, optional ``[figures]``,
+``[claims]`` (P4's claims), ``[[variants]]`` and ``[[claim]]``.
+
+``[[variants]]``
+    Scenario variants: a ``label`` and any ``[scenario]`` keys to override.
+    The comparison runs once per variant (same seed, filters rebuilt for
+    each), and every table, figure and result is suffixed with the variant's
+    label (``rmse-weak-2D``).
+``[[claim]]``
+    A claim judged by a paired interval: ``filter`` against ``baseline`` on
+    the ``steps`` (all, maneuvering, quiet) of one ``variant``, for one
+    ``component`` (position, velocity, acceleration, all axes together).
+    Each run gives one RMSE per filter over those steps; the verdict comes
+    from the 95 % paired t-interval of the per-run log ratio
+    ``log(RMSE_filter / RMSE_baseline)`` (geometric-mean ratio; a log keeps
+    a few diverged runs from deciding it): "holds" when the whole interval
+    is below 0 (the filter is more accurate), "reversed" when above, "not
+    significant" otherwise.  The ``claims`` table (kind ``paper``) gives the
+    numbers and the verdict per claim.
 
 Tables:
 
@@ -18,11 +36,12 @@ Tables:
 ``claims`` (kind ``paper``)
     P4's qualitative claims beside what we measured, for the filters named
     in ``[claims]`` (default CS and APCS).  P4 prints no usable numbers.
+    With ``[[claim]]`` tables instead: one verdict line per claim.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +50,7 @@ from scipy import stats
 
 from ..config.build import build_filters, build_scenario, resolve_section
 from ..engine.montecarlo import monte_carlo
+from .. import registry
 from ..registry import Param, register
 from ..report.figures import consistency_over_time
 from ..report.maneuver import Segment, detection_rates, mode_probabilities, rmse_panels
@@ -52,7 +72,15 @@ CLAIM_PARAMS = (
 SETTLE_STEPS = 10
 """Steps after a maneuver (or the start) before a quiet step counts as settled for the false-alarm rate."""
 
-_KNOWN_SECTIONS = {"scenario", "filters", "figures", "claims"}
+CLAIM_ENTRY_PARAMS = (
+    Param("text", "str", "", "the claim in words"),
+    Param("variant", "str", "", "the scenario variant (label) it is judged on; default: the only scenario"),
+    Param("baseline", "str", registry.REQUIRED, "the filter it is compared against"),
+    Param("filter", "str", registry.REQUIRED, "the filter the claim is about"),
+    Param("steps", "str", "all", "steps judged: all, maneuvering (any axis maneuvers) or quiet", choices=("all", "maneuvering", "quiet")),
+    Param("component", "str", "position", "error judged (all axes together)", choices=("position", "velocity", "acceleration")),
+)
+_KNOWN_SECTIONS = {"scenario", "filters", "figures", "claims", "variants", "claim"}
 PAPER_NOTE = (
     "Paper P4 (Fang & Yang 2016) gives no usable numbers: its Table 2 (mean RMSE) and Table 1 (maneuver schedule) "
     "are missing, so the schedule is the invented one of docs/spec/04-adaptive-cs-model.md §3 and only the qualitative claims "
@@ -196,7 +224,7 @@ def detection_table(result: MonteCarloResult, filters: list[Any], maneuvering: n
         det = result.filters[f.name].info["maneuver"]  # (K, M, A)
         n_q = int(settled.sum()) * result.runs
         fired = int(det[np.broadcast_to(settled[:, None, :], det.shape)].sum())
-        p = float(stats.chi2.sf(getattr(f, "threshold", np.nan), 1))
+        p = float(stats.chi2.sf(getattr(f, "threshold", np.nan), getattr(f, "detection_dof", 1)))
         rate = fired / n_q if n_q else float("nan")
         lo, hi = (stats.binom.ppf([0.025, 0.975], n_q, rate) / n_q) if n_q else (np.nan, np.nan)
         on_rate = float(det[np.broadcast_to(onset[:, None, :], det.shape)].mean()) if onset.any() else float("nan")
@@ -206,7 +234,8 @@ def detection_table(result: MonteCarloResult, filters: list[Any], maneuvering: n
         f"Maneuver detector: rate on settled non-maneuvering steps (>= {SETTLE_STEPS} steps after a maneuver) and at onsets",
         ["filter", "configured_p", "quiet_rate", "quiet_rate_lo95", "quiet_rate_hi95", "quiet_trials", "onset_rate"],
         rows,
-        notes="configured_p = P{chi2(1) > M}; the detector is exact only when the nominal model matches the target.",
+        notes="configured_p = P{chi2(m) > M}, m the dimension of the residual tested (1 per axis; 2 for azimuth and elevation); "
+        "the detector is exact only when the nominal model matches the target.",
     )
 
 
@@ -270,6 +299,76 @@ def claims_table(result: MonteCarloResult, scenario: Any, base: str, adapt: str,
     return Table("claims", f"Paper P4's claims ({adapt} vs {base}) beside what we measured", ["claim", "paper", "measured"], rows, notes=PAPER_NOTE, kind="paper")
 
 
+def _log_ratio_interval(rb: np.ndarray, rf: np.ndarray) -> tuple[float, float, float]:
+    """Mean and 95 % paired t-interval of log(rf / rb) over runs."""
+    d = np.log(rf) - np.log(rb)
+    d = d[np.isfinite(d)]
+    if d.size < 2:
+        return float("nan"), float("nan"), float("nan")
+    half = float(stats.t.ppf(0.975, d.size - 1) * d.std(ddof=1) / np.sqrt(d.size))
+    m = float(d.mean())
+    return m, m - half, m + half
+
+
+def paired_claims_table(claims: list[dict[str, Any]], measured: dict[str, tuple[MonteCarloResult, np.ndarray]]) -> Table:
+    """One verdict per ``[[claim]]``: paired 95 % interval of the per-run RMSE log ratio (see the module notes)."""
+    rows = []
+    for c in claims:
+        result, maneuvering = measured[c["variant"]]
+        K, A = maneuvering.shape
+        any_axis = maneuvering.any(axis=1)
+        pick = {"all": np.ones(K, bool), "maneuvering": any_axis, "quiet": ~any_axis}[c["steps"]]
+        cells = np.broadcast_to(pick[:, None], (K, A))
+        off = {"position": 0, "velocity": 1, "acceleration": 2}[c["component"]]
+        idx = [p + off for p in result.position_indices]
+        rb = _per_run_rmse(result, c["baseline"], idx, cells)
+        rf = _per_run_rmse(result, c["filter"], idx, cells)
+        m, lo, hi = _log_ratio_interval(rb, rf)
+        verdict = "holds" if hi < 0 else ("reversed" if lo > 0 else "not significant")
+        rows.append(
+            [
+                c["text"] or f"{c['filter']} more accurate than {c['baseline']}",
+                c["variant"],
+                c["steps"],
+                c["component"],
+                c["baseline"],
+                c["filter"],
+                float(np.median(rb)),
+                float(np.median(rf)),
+                float(np.exp(m)),
+                float(np.exp(lo)),
+                float(np.exp(hi)),
+                verdict,
+            ]
+        )
+    return Table(
+        "claims",
+        "Claims judged from the measured runs (paired over runs, common random numbers)",
+        [
+            "claim",
+            "variant",
+            "steps",
+            "component",
+            "baseline",
+            "filter",
+            "baseline_median_rmse",
+            "filter_median_rmse",
+            "ratio",
+            "ratio_lo95",
+            "ratio_hi95",
+            "verdict",
+        ],
+        rows,
+        notes="ratio: geometric mean over runs of RMSE_filter / RMSE_baseline (each run's RMSE over the judged steps, all axes), "
+        "with its 95 % paired t-interval; holds: the whole interval below 1; reversed: above 1.",
+        kind="paper",
+    )
+
+
+def _slug(label: str) -> str:
+    return "".join(ch if ch.isalnum() or ch in "-_" else "-" for ch in label).strip("-") or "variant"
+
+
 # --------------------------------------------------------------------------
 # the plan
 # --------------------------------------------------------------------------
@@ -283,28 +382,63 @@ class ManeuverPlan:
     figure_opts: dict[str, Any]
     claims: dict[str, Any] | None
     sections: dict[str, Any] = field(repr=False)
+    variants: list[dict[str, Any]] = field(default_factory=list)
+    claim_list: list[dict[str, Any]] = field(default_factory=list)
+
+    def _variant(self, variant: dict[str, Any]) -> tuple[Any, list[Any]]:
+        sections = dict(self.sections)
+        table = dict(sections["scenario"])
+        table.update({k: v for k, v in variant.items() if k != "label"})
+        sections["scenario"] = table
+        scenario = build_scenario(sections)
+        return scenario, build_filters(sections, scenario)
 
     def run(self, *, runs: int, seed: int, progress: bool = False, chunk_size: int | None = None) -> ExperimentOutput:
-        """Run the comparison and assemble tables and figures."""
+        """Run the comparison (once per variant) and assemble tables and figures."""
+        if not self.variants:
+            out, result, maneuvering = self._run_one(self.scenario, self.filters, self.claims, runs, seed, progress, chunk_size)
+            if self.claim_list:
+                out.tables.append(paired_claims_table(self.claim_list, {"": (result, maneuvering)}))
+            return out
+        tables: list[Table] = []
+        figs: dict[str, Any] = {}
+        results: dict[str, Any] = {}
+        sidecar: dict[str, Any] = {}
+        measured: dict[str, tuple[MonteCarloResult, np.ndarray]] = {}
+        for variant in self.variants:
+            label, slug = variant["label"], _slug(variant["label"])
+            scenario, filters = self._variant(variant)
+            out, result, maneuvering = self._run_one(scenario, filters, None, runs, seed, progress, chunk_size)
+            measured[label] = (result, maneuvering)
+            for t in out.tables:
+                tables.append(replace(t, name=f"{t.name}-{slug}", title=f"[{label}] {t.title}"))
+            figs.update({f"{key}-{slug}": fig for key, fig in out.figures.items()})
+            results[f"result-{slug}"] = result
+            sidecar[label] = out.sidecar
+        if self.claim_list:
+            tables.insert(0, paired_claims_table(self.claim_list, measured))
+        return ExperimentOutput(self.name, "", "", tables, figs, results=results, sidecar={"variants": sidecar})
+
+    def _run_one(self, scenario, filters, claims, runs, seed, progress, chunk_size) -> tuple[ExperimentOutput, MonteCarloResult, np.ndarray]:
         result = monte_carlo(
-            self.scenario, self.filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections,
+            scenario, filters, runs, seed, chunk_size=chunk_size, progress=progress, config=self.sections,
             store="full",  # per-axis errors, detections and mode probabilities need every run's arrays
             label=self.name,
         )
-        axes = _axes(self.scenario)
-        maneuvering = _maneuvering(self.scenario, result)
+        axes = _axes(scenario)
+        maneuvering = _maneuvering(scenario, result)
         a_star, t_star, jump = _strongest_onset(result)
         if self.figure_opts["zoom_at"] is not None:
             t_star = self.figure_opts["zoom_at"]
-        tables = [rmse_table(result, axes), segment_table(result, self.scenario, a_star, axes[a_star])]
-        det = detection_table(result, self.filters, maneuvering)
+        tables = [rmse_table(result, axes), segment_table(result, scenario, a_star, axes[a_star])]
+        det = detection_table(result, filters, maneuvering)
         if det is not None:
             tables.append(det)
         names = result.filter_names
-        if self.claims is not None and self.claims["baseline"] in names and self.claims["adaptive"] in names:
-            tables.append(claims_table(result, self.scenario, self.claims["baseline"], self.claims["adaptive"], maneuvering))
+        if claims is not None and claims["baseline"] in names and claims["adaptive"] in names:
+            tables.append(claims_table(result, scenario, claims["baseline"], claims["adaptive"], maneuvering))
 
-        segs = _segments(self.scenario)
+        segs = _segments(scenario)
         log = self.figure_opts["log_rmse"]
         figs: dict[str, Any] = {}
         for a, axis in enumerate(axes):
@@ -319,11 +453,11 @@ class ManeuverPlan:
             log=log,
             title=f"Zoom on the strongest maneuver: {axes[a_star]} axis at t = {t_star:g} s (acceleration jump {jump:g} m/s²)",
         )
-        labels = {f.name: [getattr(g, "name", "") for g in f.filters] for f in self.filters if hasattr(f, "transition")}
+        labels = {f.name: [getattr(g, "name", "") for g in f.filters] for f in filters if hasattr(f, "transition")}
         modes = mode_probabilities(result, segs, labels)
         if modes is not None:
             figs["mode_probabilities"] = modes
-        p = {f.name: float(stats.chi2.sf(f.threshold, 1)) for f in self.filters if hasattr(f, "threshold")}
+        p = {f.name: float(stats.chi2.sf(f.threshold, getattr(f, "detection_dof", 1))) for f in filters if hasattr(f, "threshold")}
         rates = detection_rates(result, axes, segs, p)
         if rates is not None:
             figs["detections"] = rates
@@ -331,14 +465,15 @@ class ManeuverPlan:
         if consistency is not None:
             figs["consistency"] = consistency
         sidecar = {"strongest_maneuver": {"axis": axes[a_star], "time_s": t_star, "jump_m_s2": jump}}
-        return ExperimentOutput(self.name, "", "", tables, figs, results={"result": result}, sidecar=sidecar)
+        out = ExperimentOutput(self.name, "", "", tables, figs, results={"result": result}, sidecar=sidecar)
+        return out, result, maneuvering
 
 
 @register(
     "experiment",
     "maneuver",
     "Maneuvering-target comparison with per-axis RMSE, maneuver segments and the claims of Fang & Yang's paper; "
-    "sections [scenario], [[filters]], [figures], [claims]",
+    "sections [scenario], [[filters]], [figures], [claims], [[variants]], [[claim]] (paired verdicts)",
 )
 def _maneuver(sections: dict[str, Any], path: Path, name: str) -> ManeuverPlan:
     for key in sections:
@@ -359,4 +494,51 @@ def _maneuver(sections: dict[str, Any], path: Path, name: str) -> ManeuverPlan:
         for key in ("baseline", "adaptive"):
             if claims[key] not in names:
                 raise ValueError(f"claims.{key}: no filter named {claims[key]!r} (have {', '.join(names)})")
-    return ManeuverPlan(name, scenario, filters, figure_opts, claims, sections)
+    variants = _resolve_variants(sections)
+    plan = ManeuverPlan(name, scenario, filters, figure_opts, claims, sections, variants)
+    names_of = {"": [f.name for f in filters]}
+    for v in variants:
+        try:
+            names_of[v["label"]] = [f.name for f in plan._variant(v)[1]]
+        except ValueError as e:
+            raise ValueError(f"variants[{variants.index(v)}]: {e}") from None
+    plan.claim_list = _resolve_claim_list(sections, names_of, bool(variants))
+    if claims is not None and variants:
+        raise ValueError("claims: P4's [claims] table needs a single scenario; with [[variants]] use [[claim]] tables")
+    return plan
+
+
+def _resolve_variants(sections: dict[str, Any]) -> list[dict[str, Any]]:
+    variants = sections.get("variants", [])
+    if not isinstance(variants, list) or not all(isinstance(v, dict) for v in variants):
+        raise ValueError("variants: expected [[variants]] tables")
+    for i, v in enumerate(variants):
+        if not isinstance(v.get("label"), str) or not v["label"]:
+            raise ValueError(f"variants[{i}].label: required (a short name for the scenario variant)")
+    labels = [v["label"] for v in variants]
+    if len(set(labels)) != len(labels):
+        raise ValueError("variants: labels must be unique")
+    if len({_slug(lbl) for lbl in labels}) != len(labels):
+        raise ValueError("variants: labels must differ in their letters and digits (they name the tables)")
+    return variants
+
+
+def _resolve_claim_list(sections: dict[str, Any], names_of: dict[str, list[str]], has_variants: bool) -> list[dict[str, Any]]:
+    entries = sections.get("claim", [])
+    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+        raise ValueError("claim: expected [[claim]] tables")
+    out = []
+    for i, entry in enumerate(entries):
+        where = f"claim[{i}]"
+        c = registry.Component("section", "claim", "", CLAIM_ENTRY_PARAMS, dict).resolve(entry, where)
+        if has_variants and c["variant"] not in names_of or c["variant"] == "" and has_variants:
+            known = ", ".join(k for k in names_of if k)
+            raise ValueError(f"{where}.variant: no variant {c['variant']!r} (have {known})")
+        if not has_variants and c["variant"]:
+            raise ValueError(f"{where}.variant: the experiment has no [[variants]]")
+        names = names_of[c["variant"]]
+        for key in ("baseline", "filter"):
+            if c[key] not in names:
+                raise ValueError(f"{where}.{key}: no filter named {c[key]!r} (have {', '.join(names)})")
+        out.append(c)
+    return out

@@ -2,6 +2,7 @@
 
 from .base import CompiledPath, FilterBase
 from .cs import AdaptiveCSFilter, CurrentStatisticalFilter, ModifiedSingerFilter
+from .cs_nonlinear import NonlinearCSFilter
 from .cuckoo import CSPF, ICSPF, CuckooParticleFilter, CuckooSearch
 from .fading import Constant, Fade, FadingContext, FadingStrategy, NoFading
 from .fading_adaptive import ExponentiallyWeighted, StrongTracking
@@ -29,6 +30,7 @@ __all__ = [
     "CurrentStatisticalFilter",
     "AdaptiveCSFilter",
     "ModifiedSingerFilter",
+    "NonlinearCSFilter",
     "InteractingMultipleModel",
     "StateMap",
     "kinematic_map",

@@ -4,6 +4,7 @@ from .linear_motion import LinearMotion
 from .maneuver import ConstantTurn, CoordinatedTurn, CurrentStatistical, Jerk, Singer
 from .measurement import LinearGaussian, RangeBearing, RangeSensors, TimeOfArrival, gaussian_loglik, wrap_angle
 from .motion import ConstantAcceleration, ConstantVelocity
+from .sensors import ObserverBearings
 from .toa import PositionFix, l_array, toa_position, trilaterate, trilateration_jacobian
 
 __all__ = [
@@ -24,6 +25,7 @@ __all__ = [
     "RangeSensors",
     "RangeBearing",
     "TimeOfArrival",
+    "ObserverBearings",
     "gaussian_loglik",
     "wrap_angle",
 ]
