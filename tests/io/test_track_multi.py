@@ -317,9 +317,18 @@ def test_a_bad_model_file_exits_2_naming_file_line_and_field(change, field, mess
     assert not out.exists()
 
 
-def test_truth_and_plot_are_refused_with_multi(files, tmp_path, capsys):
+def test_truth_and_plot_are_refused_with_multi_and_no_var_without_it(files, tmp_path, capsys):
     assert main(["track", "--multi", str(files["csv"]), "-c", str(files["gnn"]), "--truth", str(files["csv"])]) == 2
     assert "--truth is not available with --multi" in capsys.readouterr().err
+    assert main(["track", str(files["csv"]), "-c", str(files["gnn"]), "--no-var"]) == 2
+    assert "--no-var is an option of --multi" in capsys.readouterr().err
+
+
+def test_the_spelling_model_and_out_works_too(files, tmp_path):
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    assert main(["track", "--multi", str(files["csv"]), "-c", str(files["gnn"]), "-o", str(a)]) == 0
+    assert main(["track", "--multi", str(files["csv"]), "--model", str(files["gnn"]), "--out", str(b)]) == 0
+    assert a.read_bytes() == b.read_bytes()
 
 
 def test_the_model_builds_the_documented_defaults(files):

@@ -56,14 +56,17 @@ def add_track_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         description="Run the filter configured in MODEL.toml on measurements and write its estimates.",
     )
     tp.add_argument("data", help="measurements (or detections with --multi): a .csv or .jsonl file, or - for standard input (a live stream)")
-    tp.add_argument("-c", "--config", required=True, help="MODEL.toml: motion model, sensors, prior and filter (with --multi: motion, sensor and [tracker])")
+    tp.add_argument(
+        "-c", "--config", "--model", dest="config", required=True,
+        help="MODEL.toml: motion model, sensors, prior and filter (with --multi: motion, sensor and [tracker])",
+    )
     tp.add_argument(
         "--multi",
         action="store_true",
         help="multi-target tracking of unlabelled detections with the model's [tracker] (gnn or jpda): one row per confirmed track per scan",
     )
     tp.add_argument("--no-var", action="store_true", help="with --multi: leave the covariance diagonal (var_*) out of the output")
-    tp.add_argument("-o", "--output", help="estimates file (default: standard output)")
+    tp.add_argument("-o", "--output", "--out", dest="output", help="estimates (or tracks) file (default: standard output)")
     tp.add_argument("--format", choices=FORMATS, help="input format (default: from the extension; jsonl for standard input)")
     tp.add_argument("--to", choices=OUTPUT_FORMATS, help="output format (default: from the output's extension, else the input format)")
     mode = tp.add_mutually_exclusive_group()
