@@ -5,6 +5,7 @@
 ``pursuit reproduce NAME|all``        run bundled experiments (``experiments/NAME.toml``)
 ``pursuit report DIR``                rebuild report.html (and the index) from saved results
 ``pursuit track DATA --config M.toml`` run a configured filter on recorded or live measurements
+``pursuit track --multi DETS --config M.toml`` track several targets in recorded or live detections
 
 ``run`` and ``reproduce`` take ``--workers N`` (local processes) or
 ``--scheduler tcp://HOST:PORT`` (a Dask cluster) to spread the chunks of runs.
@@ -251,6 +252,10 @@ def _dispatch(args) -> int:
         return _cmd_reproduce(args)
     if args.command == "report":
         return _cmd_report(args)
+    if args.command == "track" and args.multi:
+        from .io.multi import run_track_multi
+
+        return run_track_multi(args)
     if args.command == "track":
         from .io.command import run_track
 

@@ -3,7 +3,10 @@
 A tracker table names its per-track filter as a filter table built against
 the scenario's matched models (``filter = {type = "kf"}``, the default), and
 takes the detection probability and clutter density from the scenario unless
-it sets its own (a mismatched tracker).
+it sets its own (a mismatched tracker).  Built against a model of recorded
+data instead (anything with ``motion`` and ``measurement``, as
+``pursuit track --multi`` passes), it must set ``p_detect``,
+``clutter_density`` and ``max_speed`` itself.
 """
 
 from __future__ import annotations
@@ -115,13 +118,21 @@ def _tracker_params(cls) -> tuple[Param, ...]:
 
 
 def _build_tracker(cls, scenario: Any, where: str, *, filter: dict[str, Any], p_detect, clutter_density, max_speed, **kw):
-    if not isinstance(scenario, MultiTargetScenario):
+    simulated = isinstance(scenario, MultiTargetScenario)
+    if not simulated and not (hasattr(scenario, "motion") and hasattr(scenario, "measurement")):
         raise ValueError(f"{where}.type: a tracker needs a multi-target scenario (scenario.type = \"mt-...\")")
     filt = build_filter(filter, scenario, f"{where}.filter")
+    # Recorded data (`pursuit track --multi`: a model with .motion and .measurement) has no scenario to take
+    # the detection and clutter model from, so the table must state them.
+    if not simulated:
+        for key, value in (("p_detect", p_detect), ("clutter_density", clutter_density), ("max_speed", max_speed)):
+            if value is None:
+                raise ValueError(f"{where}.{key}: required for recorded detections (there is no scenario to take it from)")
     p_detect = scenario.p_detect if p_detect is None else p_detect
     clutter_density = scenario.clutter_density if clutter_density is None else clutter_density
-    if clutter_density <= 0:
-        raise ValueError(f"{where}.clutter_density: must be positive (the scenario has no clutter: set a small density)")
+    if not clutter_density > 0:
+        why = "the scenario has no clutter: set a small density" if clutter_density == 0 and simulated else f"got {clutter_density!r}"
+        raise ValueError(f"{where}.clutter_density: must be positive ({why})")
     if max_speed is None:
         max_speed = scenario.max_speed
         if max_speed is None:

@@ -10,7 +10,11 @@
 * :mod:`~pursuit.io.tracker`: the filter advanced step by step with dt from
   the time column, refusing steps that would break it;
 * :mod:`~pursuit.io.writers`: estimates as CSV or JSON Lines;
-* :mod:`~pursuit.io.command`: the ``pursuit track`` subcommand.
+* :mod:`~pursuit.io.command`: the ``pursuit track`` subcommand;
+* :mod:`~pursuit.io.detections`, :mod:`~pursuit.io.multi_model`,
+  :mod:`~pursuit.io.multi_writers`, :mod:`~pursuit.io.multi`: ``pursuit track
+  --multi`` (detection files, the ``[tracker]`` model file, track rows, the
+  command).
 
 Example
 -------
@@ -22,6 +26,7 @@ Example
 """
 
 from .model import Sensor, TrackModel, build_track_model, load_track_model
+from .multi_model import MultiTrackModel, build_multi_model, load_multi_model
 from .records import BadRecord, Record, check_record, read_csv, read_jsonl, read_records
 from .steps import Dropped, Step, assemble_steps
 from .tracker import Estimate, StepRefused, Tracker, TrackResult, stream_records, track_records
@@ -32,6 +37,9 @@ __all__ = [
     "TrackModel",
     "build_track_model",
     "load_track_model",
+    "MultiTrackModel",
+    "build_multi_model",
+    "load_multi_model",
     "Record",
     "BadRecord",
     "check_record",

@@ -14,6 +14,9 @@ Two modes:
   step is complete.  A bad record stops the command with exit code 2 after
   the estimates already written, unless ``--skip-bad``.
 
+``--multi`` (multi-target tracking of detections) is
+:mod:`pursuit.io.multi`, with the same conventions.
+
 Exit codes: 0 success, 2 bad input (model file, data, arguments), 130
 interrupted (Ctrl-C stops a stream after the estimates already written), 1 an
 unexpected failure.
@@ -52,9 +55,18 @@ def add_track_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
         help="run a configured filter on recorded (CSV) or live (JSON Lines) measurements",
         description="Run the filter configured in MODEL.toml on measurements and write its estimates.",
     )
-    tp.add_argument("data", help="measurements: a .csv or .jsonl file, or - for standard input (a live stream)")
-    tp.add_argument("-c", "--config", required=True, help="MODEL.toml: motion model, sensors, prior and filter")
-    tp.add_argument("-o", "--output", help="estimates file (default: standard output)")
+    tp.add_argument("data", help="measurements (or detections with --multi): a .csv or .jsonl file, or - for standard input (a live stream)")
+    tp.add_argument(
+        "-c", "--config", "--model", dest="config", required=True,
+        help="MODEL.toml: motion model, sensors, prior and filter (with --multi: motion, sensor and [tracker])",
+    )
+    tp.add_argument(
+        "--multi",
+        action="store_true",
+        help="multi-target tracking of unlabelled detections with the model's [tracker] (gnn or jpda): one row per confirmed track per scan",
+    )
+    tp.add_argument("--no-var", action="store_true", help="with --multi: leave the covariance diagonal (var_*) out of the output")
+    tp.add_argument("-o", "--output", "--out", dest="output", help="estimates (or tracks) file (default: standard output)")
     tp.add_argument("--format", choices=FORMATS, help="input format (default: from the extension; jsonl for standard input)")
     tp.add_argument("--to", choices=OUTPUT_FORMATS, help="output format (default: from the output's extension, else the input format)")
     mode = tp.add_mutually_exclusive_group()
@@ -66,7 +78,8 @@ def add_track_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     tp.add_argument(
         "--out-of-order",
         choices=OUT_OF_ORDER,
-        help="records earlier than a time already reached: sort them in (batch default), drop them with a warning (stream default), or treat them as bad",
+        help="records earlier than a time already reached: sort them in (batch default), drop them with a warning (stream default), "
+        "or treat them as bad (the default with --multi)",
     )
     return tp
 
@@ -90,6 +103,10 @@ def run_track(args: argparse.Namespace, *, stdin: BinaryIO | None = None, stdout
     stdout = stdout if stdout is not None else sys.stdout
     stderr = stderr if stderr is not None else sys.stderr
     try:
+        if getattr(args, "multi", False):  # cli.py sends --multi to pursuit.io.multi.run_track_multi
+            raise _Usage("--multi is run by pursuit.io.multi.run_track_multi")
+        if getattr(args, "no_var", False):
+            raise _Usage("--no-var is an option of --multi")
         in_fmt, out_fmt, streaming, policy = _settings(args)
     except _Usage as e:
         print(f"pursuit track: error: {e}", file=stderr)

@@ -19,7 +19,7 @@ from .metrics import (
     track_counts,
     track_switches,
 )
-from .tracking import MultiTrackResult, TrackerBase, track_scans
+from .tracking import MultiTrackResult, ScanTracks, TrackerBase, track_scans, track_stream
 
 __all__ = [
     "CLUTTER",
@@ -32,6 +32,7 @@ __all__ = [
     "JPDATracker",
     "MultiTrackResult",
     "RunAverage",
+    "ScanTracks",
     "TrackCounts",
     "TrackerBase",
     "gospa",
@@ -42,5 +43,6 @@ __all__ = [
     "run_average",
     "track_counts",
     "track_scans",
+    "track_stream",
     "track_switches",
 ]

@@ -4,9 +4,11 @@ A tracker (:class:`pursuit.multitarget.GNNTracker`,
 :class:`pursuit.multitarget.JPDATracker`) is a frozen dataclass holding the
 per-track filter, the detection and clutter model, the gate and the track
 management parameters.  :func:`track_scans` runs it over a sequence of scans
-``z (K, M, D, m)`` for all Monte Carlo runs at once; the only Python loop is
-the one over scans (plus, inside GNN and JPDA, a loop over the runs or
-clusters where an assignment must be solved).  Per scan:
+``z (K, M, D, m)`` for all Monte Carlo runs at once, and
+:func:`track_stream` the same scan by scan as the scans arrive (both share
+one per-scan step, :func:`_scan`); the only Python loop is the one over scans
+(plus, inside GNN and JPDA, a loop over the runs or clusters where an
+assignment must be solved).  Per scan:
 
 1. every (track, detection) hypothesis is evaluated with one ``step`` call
    (:func:`pursuit.multitarget.association.evaluate_hypotheses`) and gated;
@@ -20,7 +22,7 @@ clusters where an assignment must be solved).  Per scan:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Iterable, Iterator
 
 import numpy as np
 
@@ -30,9 +32,9 @@ from ..filters.imm import InteractingMultipleModel
 from ..gaussian import Gaussian
 from ..rng import RNGLike
 from .association import Hypotheses, evaluate_hypotheses, log_weights
-from .management import detection_positions, initiate, new_table, update_counts
+from .management import TrackTable, detection_positions, initiate, new_table, update_counts
 
-__all__ = ["TrackerBase", "MultiTrackResult", "track_scans"]
+__all__ = ["TrackerBase", "MultiTrackResult", "ScanTracks", "track_scans", "track_stream"]
 
 # what the hypothesis evaluation and the JPDA moment matching need: a Gaussian state (mean, cov) per track
 _PER_TRACK_FILTERS = (ExtendedKalmanFilter, UnscentedKalmanFilter, CubatureKalmanFilter, InteractingMultipleModel)
@@ -239,58 +241,201 @@ def track_scans(
     Returns
     -------
     MultiTrackResult
+
+    See Also
+    --------
+    track_stream : the same tracks one scan at a time, in constant memory.
     """
     z = np.asarray(z, dtype=float)
     if z.ndim != 4:
         raise ValueError(f"z: expected detections of shape (K, M, D, m), got {z.shape}")
-    if np.isinf(z).any():
-        raise ValueError("z: detections must be finite or NaN (padding)")
-    nan = np.isnan(z)
-    if (nan.any(axis=-1) != nan.all(axis=-1)).any():
-        raise ValueError("z: a detection row must be all finite or all NaN (padding)")
+    _check_rows("z", z)
     K, M, D, m = z.shape
     L = tracker.capacity
-    filt = tracker.filter
-    motion = _layout_motion(filt)
     if times is not None:
         times = as_float_array("times", times)
         if times.shape != (K,) or np.any(np.diff(times) <= 0):
             raise ValueError(f"times: expected {K} increasing scan times, got shape {times.shape}")
-    model_dt = getattr(motion, "dt", None)
-    if tracker.max_speed is not None and times is None and model_dt is None:
-        raise ValueError("times: initiation needs scan times when the motion model has no dt")
-
-    if initial is not None:
-        mean, cov, L0 = _as_initial(initial, M, L)
-    else:
-        n = getattr(motion, "dim", None)
-        if n is None:
-            raise ValueError("initial: give initial tracks, or a filter whose motion model has dim")
-        mean, cov, L0 = np.zeros((M, L, int(n))), np.broadcast_to(np.eye(int(n)), (M, L, int(n), int(n))).copy(), 0
-    n = mean.shape[-1]
-    parking = filt.init(Gaussian(np.zeros((M, L, n)), np.broadcast_to(np.eye(n), (M, L, n, n))), batch=(M, L), rng=rng)
-    table = new_table(filt.init(Gaussian(mean, cov), batch=(M, L), rng=rng), M, L, L0)
+    _check_timing(tracker, timed=times is not None)
+    table, parking = _start(tracker, M, initial, rng)
+    n = parking.mean.shape[-1]
 
     out_mean = np.full((K, M, L, n), np.nan)
     out_cov = np.full((K, M, L, n, n), np.nan)
     out_label = np.full((K, M, L), -1, dtype=np.int64)
     out_conf = np.zeros((K, M, L), dtype=bool)
     out_drop = np.zeros((K, M), dtype=np.int64)
-    for k in range(1, K + 1):
-        dt = None if times is None or k == 1 else float(times[k - 1] - times[k - 2])
-        zk = z[k - 1]
-        hyp = evaluate_hypotheses(filt, table.state, zk, table.alive, tracker.gate, k, dt)
-        log_g = log_weights(hyp, tracker.p_detect, tracker.clutter_density, tracker.gate)
-        state, hit = tracker.associate(hyp, log_g)
-        table = update_counts(table, state, hit & table.alive, parking, tracker.confirm, tracker.max_misses)
-        if tracker.max_speed is not None:
-            unused = hyp.detected & ~hyp.gated.any(axis=1)
-            step_dt = dt if dt is not None else model_dt  # None only at the first scan, which pairs nothing
-            table = initiate(table, filt, zk, unused, tracker.position, motion, tracker.max_speed, step_dt, rng)
-        alive = table.alive
-        out_mean[k - 1] = np.where(alive[..., None], table.state.mean, np.nan)
-        out_cov[k - 1] = np.where(alive[..., None, None], table.state.cov, np.nan)
-        out_label[k - 1] = table.label
-        out_conf[k - 1] = table.confirmed
-        out_drop[k - 1] = table.dropped
+    scans = zip([None] * K if times is None else times.tolist(), z)
+    for k, tracks in enumerate(_steps(tracker, table, parking, scans, rng)):
+        out_mean[k] = tracks.mean
+        out_cov[k] = tracks.cov
+        out_label[k] = tracks.label
+        out_conf[k] = tracks.confirmed
+        out_drop[k] = tracks.dropped
     return MultiTrackResult(out_mean, out_cov, out_label, out_conf, out_drop, tracker.name)
+
+
+@dataclass(frozen=True)
+class ScanTracks:
+    """The tracks of all runs after one scan: one time slice of a :class:`MultiTrackResult`.
+
+    Attributes
+    ----------
+    time
+        The scan's time (None when the scans came without times).
+    mean, cov
+        ``(M, L, n)``, ``(M, L, n, n)`` (NaN in free slots).
+    label
+        ``(M, L)`` persistent labels, −1 for a free slot.
+    confirmed
+        ``(M, L)`` the slot holds a confirmed track.
+    dropped
+        ``(M,)`` new tracks dropped at this scan for want of a free slot.
+    """
+
+    time: float | None
+    mean: np.ndarray
+    cov: np.ndarray
+    label: np.ndarray
+    confirmed: np.ndarray
+    dropped: np.ndarray
+
+
+def track_stream(
+    tracker: TrackerBase, scans: Iterable[tuple[float | None, Any]], *, initial: Any = None, rng: RNGLike = None
+) -> Iterator[ScanTracks]:
+    """Run a multi-target tracker scan by scan, yielding the tracks after each scan.
+
+    The same computation as :func:`track_scans` (both run one shared
+    per-scan step), in memory that does not grow with the number of scans:
+    for a live feed or a recording too long to hold.  With the same
+    detections (a scan's rows may be given without :func:`track_scans`'s
+    padding) and times, the tracks are bit for bit those of
+    :func:`track_scans`.
+
+    Parameters
+    ----------
+    tracker
+        A :class:`TrackerBase` subclass (GNN, JPDA).
+    scans
+        ``(time, z)`` pairs, read lazily: ``z (M, D, m)`` the detections of
+        one scan for M runs (M fixed, D free to change from scan to scan, NaN
+        rows padding), ``time`` its time, strictly increasing, or None for
+        every scan (steps of the motion model's ``dt``).
+    initial, rng
+        As in :func:`track_scans`.
+
+    Yields
+    ------
+    ScanTracks
+        The tracks after each scan, once the scan has been processed.
+
+    Raises
+    ------
+    ValueError
+        Naming the field, when a scan's detections, its time or ``initial``
+        do not fit; raised when that scan is reached, after the scans before it
+        were yielded.
+    """
+    return _stream(tracker, scans, initial, rng)
+
+
+def _stream(tracker: TrackerBase, scans: Iterable[tuple[float | None, Any]], initial: Any, rng: RNGLike) -> Iterator[ScanTracks]:
+    it = iter(scans)
+    first = next(it, None)
+    if first is None:
+        return
+    time, z0 = first
+    z0 = _checked_scan(z0, 1, None)
+    _check_timing(tracker, timed=time is not None)
+    table, parking = _start(tracker, z0.shape[0], initial, rng)
+
+    def checked() -> Iterator[tuple[float | None, np.ndarray]]:
+        previous, shape = time, z0.shape
+        yield time, z0
+        for k, (t, z) in enumerate(it, start=2):
+            z = _checked_scan(z, k, shape)
+            if (t is None) != (previous is None):
+                have = ("no", "had one") if t is None else ("a", "had none")
+                raise ValueError(f"time: scan {k} has {have[0]} time and scan 1 {have[1]}: give every scan a time, or none")
+            if t is not None and not float(t) > float(previous):
+                raise ValueError(f"time: scan {k} at {float(t)!r} is not after the previous scan's time {float(previous)!r}")
+            previous = t
+            yield t, z
+
+    yield from _steps(tracker, table, parking, checked(), rng)
+
+
+def _check_rows(name: str, z: np.ndarray) -> None:
+    if np.isinf(z).any():
+        raise ValueError(f"{name}: detections must be finite or NaN (padding)")
+    nan = np.isnan(z)
+    if (nan.any(axis=-1) != nan.all(axis=-1)).any():
+        raise ValueError(f"{name}: a detection row must be all finite or all NaN (padding)")
+
+
+def _checked_scan(z: Any, k: int, shape: tuple[int, ...] | None) -> np.ndarray:
+    z = np.asarray(z, dtype=float)
+    if z.ndim != 3:
+        raise ValueError(f"z: scan {k}: expected detections of shape (M, D, m), got {z.shape}")
+    if shape is not None and (z.shape[0], z.shape[2]) != (shape[0], shape[2]):
+        raise ValueError(f"z: scan {k}: expected {shape[0]} runs of {shape[2]}-component detections as in scan 1, got {z.shape}")
+    _check_rows(f"z: scan {k}", z)
+    return z
+
+
+def _check_timing(tracker: TrackerBase, timed: bool) -> None:
+    if tracker.max_speed is not None and not timed and getattr(_layout_motion(tracker.filter), "dt", None) is None:
+        raise ValueError("times: initiation needs scan times when the motion model has no dt")
+
+
+def _start(tracker: TrackerBase, runs: int, initial: Any, rng: RNGLike) -> tuple[Any, Any]:
+    """The track table before the first scan, and the parked state that fills free slots."""
+    M, L = runs, tracker.capacity
+    filt = tracker.filter
+    if initial is not None:
+        mean, cov, L0 = _as_initial(initial, M, L)
+    else:
+        n = getattr(_layout_motion(filt), "dim", None)
+        if n is None:
+            raise ValueError("initial: give initial tracks, or a filter whose motion model has dim")
+        mean, cov, L0 = np.zeros((M, L, int(n))), np.broadcast_to(np.eye(int(n)), (M, L, int(n), int(n))).copy(), 0
+    n = mean.shape[-1]
+    parking = filt.init(Gaussian(np.zeros((M, L, n)), np.broadcast_to(np.eye(n), (M, L, n, n))), batch=(M, L), rng=rng)
+    table = new_table(filt.init(Gaussian(mean, cov), batch=(M, L), rng=rng), M, L, L0)
+    return table, parking
+
+
+def _steps(
+    tracker: TrackerBase, table: TrackTable, parking: Any, scans: Iterable[tuple[float | None, np.ndarray]], rng: RNGLike
+) -> Iterator[ScanTracks]:
+    """The one loop over scans of :func:`track_scans` and :func:`track_stream` (inputs already checked)."""
+    previous = None
+    for k, (time, zk) in enumerate(scans, start=1):
+        dt = None if time is None or k == 1 else float(time - previous)
+        table = _scan(tracker, table, parking, zk, k, dt, rng)
+        previous = time
+        alive = table.alive
+        yield ScanTracks(
+            time=None if time is None else float(time),
+            mean=np.where(alive[..., None], table.state.mean, np.nan),
+            cov=np.where(alive[..., None, None], table.state.cov, np.nan),
+            label=table.label,
+            confirmed=table.confirmed,
+            dropped=table.dropped,
+        )
+
+
+def _scan(tracker: TrackerBase, table: TrackTable, parking: Any, zk: np.ndarray, k: int, dt: float | None, rng: RNGLike) -> TrackTable:
+    """One scan (``zk (M, D, m)``, the k-th, ``dt`` after the last or None): associate, count, initiate."""
+    filt = tracker.filter
+    hyp = evaluate_hypotheses(filt, table.state, zk, table.alive, tracker.gate, k, dt)
+    log_g = log_weights(hyp, tracker.p_detect, tracker.clutter_density, tracker.gate)
+    state, hit = tracker.associate(hyp, log_g)
+    table = update_counts(table, state, hit & table.alive, parking, tracker.confirm, tracker.max_misses)
+    if tracker.max_speed is not None:
+        motion = _layout_motion(filt)
+        unused = hyp.detected & ~hyp.gated.any(axis=1)
+        step_dt = dt if dt is not None else getattr(motion, "dt", None)  # None only at the first scan, which pairs nothing
+        table = initiate(table, filt, zk, unused, tracker.position, motion, tracker.max_speed, step_dt, rng)
+    return table
