@@ -178,3 +178,17 @@ def test_a_particle_filter_is_refused_as_per_track_filter():
     for cls in (GNNTracker, JPDATracker):
         with pytest.raises(ValueError, match="filter: BootstrapParticleFilter cannot be a per-track filter"):
             cls(pf, 0.9, 1e-3)
+
+
+def test_track_method_is_track_scans():
+    from pursuit.filters import KalmanFilter
+    from pursuit.multitarget import GNNTracker, track_scans
+    from pursuit.rng import run_streams
+    from pursuit.scenarios.multitarget import crossing
+
+    sc = crossing(steps=6)
+    _, scans = sc.simulate(run_streams(1, range(3), 0), 3)
+    tracker = GNNTracker(KalmanFilter(sc.motion, sc.measurement), sc.p_detect, sc.clutter_density, max_speed=sc.max_speed)
+    a = tracker.track(scans.z, times=scans.times)
+    b = track_scans(tracker, scans.z, times=scans.times)
+    assert np.array_equal(a.mean, b.mean, equal_nan=True) and np.array_equal(a.label, b.label)

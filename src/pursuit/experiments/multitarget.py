@@ -20,7 +20,7 @@ import numpy as np
 from .. import registry
 from ..config.build import build_scenario, resolve_section
 from ..multitarget.metrics import gospa, gospa_summary, track_counts, track_switches
-from ..multitarget.tracking import MultiTrackResult, track_scans
+from ..multitarget.tracking import MultiTrackResult
 from ..registry import Param, register
 from ..report.mt_figures import gospa_over_time, scene
 from ..rng import run_streams
@@ -151,7 +151,7 @@ class MultiTargetPlan:
         scores = []
         for tracker in self.trackers:
             t0 = time.perf_counter()
-            result = track_scans(tracker, scans.z, times=scans.times)
+            result = tracker.track(scans.z, times=scans.times)
             wall = time.perf_counter() - t0
             scores.append(score(tracker.name, result, truth, pos, self.metrics, wall))
             if progress:

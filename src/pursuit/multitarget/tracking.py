@@ -141,6 +141,13 @@ class TrackerBase:
         if not self.name:
             object.__setattr__(self, "name", f"{type(self).__name__.removesuffix('Tracker')}-{getattr(self.filter, 'name', '')}")
 
+    def track(self, z: Any, *, times: Any = None, rng: RNGLike = None) -> "MultiTrackResult":
+        """Track scans ``z (K, M, D, m)`` of all runs: :func:`track_scans` with no initial tracks.
+
+        Every multi-target tracker has this method (the experiment kind calls it).
+        """
+        return track_scans(self, z, times=times, rng=rng)
+
     def associate(self, hyp: Hypotheses, log_g: np.ndarray) -> tuple[Any, np.ndarray]:
         """Each track's posterior (batch ``(M, L)``) and hit flag ``(M, L)`` from the scan's hypotheses."""
         raise NotImplementedError
