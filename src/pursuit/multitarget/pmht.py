@@ -534,11 +534,16 @@ class PMHTTracker(TrackerBase):
             first = np.where(alive, prior_scan - (s - 1), Bw)  # window step at which each track starts
             wmodel = model.window(s - 1, k)
             start = _warm_start(wmodel, X, prior_mean, first, Bw)
-            fit = em_window(
-                wmodel, prior_mean, prior_cov, first, z[s - 1 : k], start,
+            # EM on the alive slots only, packed to the left (free slots would be inert but cost as much)
+            slots = np.argsort(~alive, axis=1, kind="stable")[:, : max(1, int(alive.sum(axis=1).max()))]
+            pack = _packer(slots)
+            packed = em_window(
+                wmodel, pack(prior_mean), pack(prior_cov), pack(first), z[s - 1 : k], pack(start),
                 p_detect=self.p_detect, clutter_density=self.clutter_density, volume=self.volume,
-                estimate_priors=self.estimate_priors, max_iter=self.max_iter, tol=self.tol, maneuver=maneuver,
+                estimate_priors=self.estimate_priors, max_iter=self.max_iter, tol=self.tol,
+                maneuver=None if maneuver is None else replace(maneuver, prior=pack(maneuver.prior)),
             )  # fmt: skip
+            fit = _unpack(packed, slots, L)
             in_window = alive & (first < Bw)
             out_iter[k - 1] = np.where(in_window.any(axis=1), fit.iterations, 0)
             out_obj[k - 1] = np.where(in_window.any(axis=1), fit.objective, np.nan)
@@ -584,6 +589,38 @@ class PMHTTracker(TrackerBase):
             out_conf[k - 1] = table.confirmed
             out_drop[k - 1] = table.dropped
         return PMHTResult(out_mean, out_cov, out_label, out_conf, out_drop, self.name, out_iter, out_obj)
+
+
+def _packer(slots: np.ndarray) -> Any:
+    """``pack(a (M, L, ...)) -> (M, L', ...)``: the slots ``slots (M, L')`` of each run."""
+
+    def pack(a: np.ndarray) -> np.ndarray:
+        return np.take_along_axis(a, slots.reshape(*slots.shape, *(1,) * (a.ndim - 2)), axis=1)
+
+    return pack
+
+
+def _unpack(fit: WindowFit, slots: np.ndarray, capacity: int) -> WindowFit:
+    """The per-slot arrays of a packed fit back in ``capacity`` slots (zeros in the others)."""
+
+    def unpack(a: np.ndarray | None) -> np.ndarray | None:
+        if a is None:
+            return None
+        out = np.zeros((a.shape[0], capacity, *a.shape[2:]))
+        np.put_along_axis(out, slots.reshape(*slots.shape, *(1,) * (a.ndim - 2)), a, axis=1)
+        return out
+
+    return replace(
+        fit,
+        mean=unpack(fit.mean),
+        cov=unpack(fit.cov),
+        filt_mean=unpack(fit.filt_mean),
+        filt_cov=unpack(fit.filt_cov),
+        weights=unpack(fit.weights),
+        W=unpack(fit.W),
+        mode_probs=unpack(fit.mode_probs),
+        mode_filtered=unpack(fit.mode_filtered),
+    )
 
 
 def _warm_start(model: LinearModel, X: np.ndarray, prior_mean: np.ndarray, first: np.ndarray, B: int) -> np.ndarray:
