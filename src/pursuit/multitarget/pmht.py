@@ -235,67 +235,76 @@ def em_window(
         log_c = np.full((M, B), np.log(clutter_density))
         log_pi = np.full((M, L, B), np.log(p_detect))
     log_pi = np.where(active, log_pi, -np.inf)
+    log_c = np.array(log_c)
 
-    def estep(X: np.ndarray, log_c: np.ndarray, log_pi: np.ndarray):
+    def estep(r: np.ndarray, X: np.ndarray, log_c: np.ndarray, log_pi: np.ndarray):
+        """Weights and the association term of the runs ``r`` (X, log_c, log_pi: those runs' rows)."""
+        zr, dr, ar = zt[r], det[r], active[r]
         hx = np.einsum("ij,mlbj->mlbi", model.H, X)
-        res = zt[:, None] - hx[:, :, :, None, :]  # (M, L, B, D, m)
+        res = zr[:, None] - hx[:, :, :, None, :]  # (M, L, B, D, m)
         logN = -0.5 * (np.einsum("mlbdi,ij,mlbdj->mlbd", res, Rinv, res) + R_logdet)
-        lt = np.where(det[:, None] & active[..., None], log_pi[..., None] + logN, -np.inf)
+        lt = np.where(dr[:, None] & ar[..., None], log_pi[..., None] + logN, -np.inf)
         top = np.maximum(log_c[..., None], lt.max(axis=1))  # (M, B, D)
         top = np.where(np.isfinite(top), top, 0.0)
         total = np.exp(log_c[..., None] - top) + np.exp(lt - top[:, None]).sum(axis=1)
         denom = top + np.log(total)
-        w = np.where(det[:, None], np.exp(lt - denom[:, None]), 0.0)
-        w0 = np.where(det, np.exp(log_c[..., None] - denom), 0.0)
-        return w, w0, np.where(det, denom, 0.0).sum(axis=(1, 2))
+        w = np.where(dr[:, None], np.exp(lt - denom[:, None]), 0.0)
+        w0 = np.where(dr, np.exp(log_c[..., None] - denom), 0.0)
+        return w, w0, np.where(dr, denom, 0.0).sum(axis=(1, 2))
 
+    every = np.arange(M)
     X = np.array(start, dtype=float)
     maneuvers = maneuver is not None and maneuver.levels.size > 0 and model.inputs.shape[1] > 0
-    A = model.inputs.shape[1]
-    ubar = np.zeros((M, L, B, A))
-    w, w0, assoc = estep(X, log_c, log_pi)
-    smoothed = None
-    gamma = alpha = None
+    ubar = np.zeros((M, L, B, model.inputs.shape[1]))
+    w, w0, assoc = estep(every, X, log_c, log_pi)
     objective = assoc + _process_loglik(model, X, ubar, prior_mean, prior_cov, first, active)
+    smoothed: tuple[np.ndarray, ...] | None = None
+    gamma = alpha = None
     history = np.full((max_iter + 1, M), np.nan)
     history[0] = objective
     iterations = np.zeros(M, dtype=np.int64)
     done = np.zeros(M, dtype=bool)
+    # Each iteration works on the runs still iterating only (``r``); the others keep their arrays as they are.
     for it in range(1, max_iter + 1):
+        r = np.nonzero(~done)[0]
+        pm, pc, fr, ar = prior_mean[r], prior_cov[r], first[r], active[r]
         if maneuvers:
             from .epmht import mode_posteriors  # EPMHT builds on this module
 
-            g, a = mode_posteriors(model, maneuver, X, smoothed, prior_mean, prior_cov, first, active)
-            gamma = g if gamma is None else np.where(done[:, None, None, None, None], gamma, g)
-            alpha = a if alpha is None else np.where(done[:, None, None, None, None], alpha, a)
-            ubar = np.einsum("mlbaj,j->mlba", gamma, maneuver.levels)
+            Xr = X[r]
+            prev = None if smoothed is None else tuple(a[r] for a in smoothed)
+            g, a = mode_posteriors(model, replace(maneuver, prior=maneuver.prior[r]), Xr, prev, pm, pc, fr, ar)
+            if gamma is None:
+                gamma, alpha = g, a
+            else:
+                gamma[r], alpha[r] = g, a
+            ubar[r] = np.einsum("mlbaj,j->mlba", g, maneuver.levels)
+        wr, w0r = w[r], w0[r]
         if estimate_priors:
-            share = np.maximum(n_det, 1)
-            pi_t = w.sum(axis=3) / share[:, None]  # (M, L, B)
-            pi_0 = w0.sum(axis=2) / share
-            keep = done[:, None] | (n_det == 0)  # a scan without detections says nothing about π
+            nd = n_det[r]
+            share = np.maximum(nd, 1)
+            keep = nd == 0  # a scan without detections says nothing about π
             with np.errstate(divide="ignore"):
-                log_c = np.where(keep, log_c, np.log(pi_0) - np.log(volume))
-                log_pi = np.where(keep[:, None], log_pi, np.where(active, np.log(pi_t), -np.inf))
-        W = w.sum(axis=3)  # (M, L, B)
-        zs = np.einsum("mlbd,mbdi->mlbi", w, zt) / np.where(W > 0, W, 1.0)[..., None]
-        new = _smooth(model, prior_mean, prior_cov, active, active & (W > 0), zs, W, ubar)
-        freeze = done[:, None, None, None]
+                log_c[r] = np.where(keep, log_c[r], np.log(w0r.sum(axis=2) / share) - np.log(volume))
+                pi_t = wr.sum(axis=3) / share[:, None]  # (M', L, B)
+                log_pi[r] = np.where(keep[:, None], log_pi[r], np.where(ar, np.log(pi_t), -np.inf))
+        W = wr.sum(axis=3)  # (M', L, B)
+        zs = np.einsum("mlbd,mbdi->mlbi", wr, zt[r]) / np.where(W > 0, W, 1.0)[..., None]
+        new = _smooth(model, pm, pc, ar, ar & (W > 0), zs, W, ubar[r])
         if smoothed is None:
             smoothed = new
         else:
-            smoothed = tuple(np.where(freeze if a.ndim == 4 else freeze[..., None], old, a) for old, a in zip(smoothed, new))
+            for full, part in zip(smoothed, new):
+                full[r] = part
         X = smoothed[0]
-        w_new, w0_new, assoc = estep(X, log_c, log_pi)
-        w = np.where(done[:, None, None, None], w, w_new)
-        w0 = np.where(done[:, None, None], w0, w0_new)
-        value = assoc + _process_loglik(model, X, ubar, prior_mean, prior_cov, first, active)
-        value = np.where(done, objective, value)
-        iterations = np.where(done, iterations, it)
-        history[it] = np.where(done, np.nan, value)
-        converged = np.abs(value - objective) <= tol * np.abs(objective)
-        objective = value
-        done = done | converged
+        w_new, w0_new, assoc = estep(r, X[r], log_c[r], log_pi[r])
+        w[r], w0[r] = w_new, w0_new
+        value = assoc + _process_loglik(model, X[r], ubar[r], pm, pc, fr, ar)
+        iterations[r] = it
+        history[it, r] = value
+        converged = np.abs(value - objective[r]) <= tol * np.abs(objective[r])
+        objective[r] = value
+        done[r] = converged
         if done.all():
             break
     xs, Ps, xf, Pf = smoothed
