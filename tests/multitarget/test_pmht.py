@@ -131,7 +131,8 @@ def test_separated_targets_tracker_equals_independent_kalman_filters():
 def test_em_objective_never_decreases(seed, targets, clutter, p_detect, B, estimate):
     """Random small scenes (close targets, clutter, misses, a poor warm start): L_i ≥ L_{i−1} at every M-step."""
     rng = np.random.default_rng(seed)
-    starts = np.column_stack([rng.uniform(-8, 8, targets), rng.normal(0, 1, targets), rng.uniform(-8, 8, targets), rng.normal(0, 1, targets)])
+    pos, vel = rng.uniform(-8, 8, (2, targets)), rng.normal(0, 1, (2, targets))
+    starts = np.column_stack([pos[0], vel[0], pos[1], vel[1]])
     region = ((-20.0, 20.0), (-20.0, 20.0))
     _, z = simulate(starts, B, 3, seed, p_detect=p_detect, clutter_rate=clutter, region=region)
     runs = z.shape[1]
@@ -177,9 +178,10 @@ def test_order_of_detections_within_a_scan_does_not_matter():
     np.testing.assert_allclose(a.cov, b.cov, rtol=1e-12, atol=1e-10)
 
 
-def test_batch_equals_one_run_at_a_time():
+@pytest.mark.parametrize("epmht", [False, True])
+def test_batch_equals_one_run_at_a_time(epmht):
     truth, z = cluttered_scene(runs=3, K=25)
-    tr = tracker()
+    tr = tracker(EPMHTTracker, levels=(-0.5, 0.0, 0.5)) if epmht else tracker()
     whole = tr.track(z)
     for m in range(z.shape[1]):
         one = tr.track(z[:, m : m + 1])

@@ -48,9 +48,8 @@ from ..rng import RNGLike
 from .management import initiate, new_table, update_counts
 from .tracking import MultiTrackResult, TrackerBase, _as_initial, _layout_motion
 
-__all__ = ["PMHTTracker", "PMHTResult", "WindowFit", "LinearModel", "em_window", "linear_model"]
+__all__ = ["PMHTTracker", "PMHTResult", "WindowFit", "LinearModel", "Maneuver", "em_window", "linear_model"]
 
-_LOG_2PI = float(np.log(2.0 * np.pi))
 
 
 # --------------------------------------------------------------------------
