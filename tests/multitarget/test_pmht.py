@@ -13,6 +13,7 @@ from pursuit.models import ConstantVelocity, LinearGaussian
 from pursuit.multitarget import EPMHTTracker, PMHTTracker
 from pursuit.multitarget.pmht import em_window, linear_model
 
+from ._checks import range_bearing_scene
 from ._scenes import cv_models, simulate
 
 CLUTTER_REGION = ((-60.0, 60.0), (-60.0, 60.0))
@@ -199,6 +200,17 @@ def test_same_seed_same_bits():
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
 
 
+def test_range_bearing_sensor_through_the_linearised_smoother():
+    """A nonlinear sensor (EKF linearisation in the M-step): two targets in clutter found and held."""
+    cv, rb, truth, z, density = range_bearing_scene()
+    res = PMHTTracker(pu.ExtendedKalmanFilter(cv, rb), 0.9, density, max_speed=4.0).track(z)
+    pos, mask = res.positions((0, 2))
+    d = np.linalg.norm(pos[:, :, :, None] - truth[..., [0, 2]][:, :, None], axis=-1)
+    err = np.where(mask[..., None], d, np.inf).min(axis=2)[10:]
+    assert (err < 5.0).mean() > 0.95
+    assert res.confirmed[10:].sum(axis=-1).mean() < 2.5
+
+
 # --------------------------------------------------------------------------
 # EPMHT
 # --------------------------------------------------------------------------
@@ -265,7 +277,7 @@ def test_bad_inputs_name_the_field():
     with pytest.raises(ValueError, match="mode_prior"):
         EPMHTTracker(kf(), 0.9, CLUTTER_DENSITY, mode_prior=(0.5, 0.5))
     with pytest.raises(ValueError, match="filter"):
-        PMHTTracker(pu.ExtendedKalmanFilter(*cv_models()[:1], pu.models.RangeBearing(np.zeros(2), 1.0, 0.01)), 0.9, 1e-3)
+        PMHTTracker(pu.UnscentedKalmanFilter(pu.models.CoordinatedTurn(), pu.models.RangeBearing(np.zeros(2), 1.0, 0.01)), 0.9, 1e-3)
     with pytest.raises(ValueError, match="z"):
         tracker().track(np.zeros((3, 2, 2)))
     with pytest.raises(ValueError, match="times"):

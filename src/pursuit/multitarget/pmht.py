@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import as_float_array, in_range, positive, positive_int
+from ..filters.jacobians import measurement_jacobian
 from ..gaussian import Gaussian
 from ..rng import RNGLike
 from .management import initiate, new_table, update_counts
@@ -66,10 +67,14 @@ class LinearModel:
     Q_pinv, Q_logpdet
         ``(B, n, n)`` Q's pseudo-inverse and ``(B,)`` log pseudo-determinant of 2πQ.
     H, R
-        ``(m, n)`` and ``(m, m)``.
+        ``(m, n)`` (None for a nonlinear sensor) and ``(m, m)``.
     inputs
         ``(B, A, n)``: the state change per unit of maneuver input on axis a
         (EPMHT; ``A = 0`` for PMHT).
+    measurement
+        The measurement model, used when ``H`` is None (``h``, ``residual``,
+        its Jacobian or central differences): the M-step then linearises h
+        at the current states (an EKF smoother on the synthetic measurements).
     """
 
     F: np.ndarray
@@ -79,6 +84,7 @@ class LinearModel:
     H: np.ndarray
     R: np.ndarray
     inputs: np.ndarray
+    measurement: Any = None
 
     def window(self, start: int, stop: int) -> "LinearModel":
         """The steps ``start:stop``."""
@@ -104,11 +110,12 @@ def linear_model(motion: Any, measurement: Any, dts: list[float | None], inputs:
     inv = np.where(keep, 1.0 / np.where(keep, vals, 1.0), 0.0)
     Q_pinv = np.einsum("kij,kj,klj->kil", vecs, inv, vecs)
     Q_logpdet = np.sum(np.where(keep, np.log(2.0 * np.pi * np.where(keep, vals, 1.0)), 0.0), axis=-1)
-    H = np.asarray(measurement.matrix(1), dtype=float)
+    linear = callable(getattr(measurement, "matrix", None))
+    H = np.asarray(measurement.matrix(1), dtype=float) if linear else None
     R = np.asarray(measurement.cov(1), dtype=float)
     n = F.shape[-1]
     U = np.stack([np.asarray(inputs(dt), dtype=float) for dt in dts]) if inputs is not None else np.zeros((len(dts), 0, n))
-    return LinearModel(F, Q, Q_pinv, Q_logpdet, H, R, U)
+    return LinearModel(F, Q, Q_pinv, Q_logpdet, H, R, U, measurement)
 
 
 def _call(fn: Any, dt: float | None) -> Any:
@@ -239,8 +246,7 @@ def em_window(
     def estep(r: np.ndarray, X: np.ndarray, log_c: np.ndarray, log_pi: np.ndarray):
         """Weights and the association term of the runs ``r`` (X, log_c, log_pi: those runs' rows)."""
         zr, dr, ar = zt[r], det[r], active[r]
-        hx = np.einsum("ij,mlbj->mlbi", model.H, X)
-        res = zr[:, None] - hx[:, :, :, None, :]  # (M, L, B, D, m)
+        res = _residuals(model, zr, X)  # (M, L, B, D, m)
         logN = -0.5 * (np.einsum("mlbdi,ij,mlbdj->mlbd", res, Rinv, res) + R_logdet)
         lt = np.where(dr[:, None] & ar[..., None], log_pi[..., None] + logN, -np.inf)
         top = np.maximum(log_c[..., None], lt.max(axis=1))  # (M, B, D)
@@ -288,8 +294,15 @@ def em_window(
                 pi_t = wr.sum(axis=3) / share[:, None]  # (M', L, B)
                 log_pi[r] = np.where(keep[:, None], log_pi[r], np.where(ar, np.log(pi_t), -np.inf))
         W = wr.sum(axis=3)  # (M', L, B)
-        zs = np.einsum("mlbd,mbdi->mlbi", wr, zt[r]) / np.where(W > 0, W, 1.0)[..., None]
-        new = _smooth(model, pm, pc, ar, ar & (W > 0), zs, W, ubar[r])
+        if model.H is not None:
+            zs = np.einsum("mlbd,mbdi->mlbi", wr, zt[r]) / np.where(W > 0, W, 1.0)[..., None]
+            H = model.H
+        else:  # linearised at the current states: z̃ = H x̄ + Σ_r w (z_r ⊖ h(x̄)) / W
+            Xr = X[r]
+            H = np.asarray(measurement_jacobian(model.measurement, Xr, 1), dtype=float)
+            nu = np.einsum("mlbd,mlbdi->mlbi", wr, _residuals(model, zt[r], Xr)) / np.where(W > 0, W, 1.0)[..., None]
+            zs = np.einsum("mlbij,mlbj->mlbi", H, Xr) + nu
+        new = _smooth(model, pm, pc, ar, ar & (W > 0), zs, W, ubar[r], H)
         if smoothed is None:
             smoothed = new
         else:
@@ -319,14 +332,16 @@ def _smooth(
     zs: np.ndarray,
     W: np.ndarray,
     ubar: np.ndarray,
+    H: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """KF on the synthetic measurements (R / W) then RTS, for all slots; before a track's first step its state is held.
 
-    ``active (M, L, B)``: the track exists at the step; ``measured``: active and W > 0.
+    ``active (M, L, B)``: the track exists at the step; ``measured``: active and W > 0;
+    ``H``: ``(m, n)``, or ``(M, L, B, m, n)`` per slot and step (a linearised sensor).
     """
     M, L, B, _ = zs.shape
     n = prior_mean.shape[-1]
-    H, R = model.H, model.R
+    R = model.R
     x, P = prior_mean, prior_cov
     xf = np.empty((M, L, B, n))
     Pf = np.empty((M, L, B, n, n))
@@ -347,10 +362,11 @@ def _smooth(
         upd = measured[..., b]
         # R̃ = R / W without dividing (W may be tiny): S' = W H P⁻ H' + R = W S, gain K = W P⁻ H' S'⁻¹
         Wb = np.where(upd, W[..., b], 0.0)[..., None, None]
-        PHt = P_pred @ H.T
-        S = Wb * (H @ PHt) + R
+        Hb = H if H.ndim == 2 else H[:, :, b]
+        PHt = P_pred @ np.swapaxes(Hb, -1, -2)
+        S = Wb * (Hb @ PHt) + R
         KtW = np.linalg.solve(S, np.swapaxes(PHt, -1, -2))  # S'⁻¹ H P⁻, i.e. Kᵀ / W
-        nu = zs[:, :, b] - np.einsum("ij,...j->...i", H, x_pred)
+        nu = zs[:, :, b] - np.einsum("...ij,...j->...i", Hb, x_pred)
         x_upd = x_pred + Wb[..., 0] * np.einsum("...ji,...j->...i", KtW, nu)
         P_upd = P_pred - Wb * (PHt @ KtW)
         P_upd = 0.5 * (P_upd + np.swapaxes(P_upd, -1, -2))
@@ -364,6 +380,14 @@ def _smooth(
         Pn = Pf[:, :, b] + G @ (Ps[:, :, b + 1] - Pp[:, :, b + 1]) @ np.swapaxes(G, -1, -2)
         Ps[:, :, b] = 0.5 * (Pn + np.swapaxes(Pn, -1, -2))
     return xs, Ps, xf, Pf
+
+
+def _residuals(model: LinearModel, z: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """``(M, L, B, D, m)`` z_r ⊖ h(x) for detections ``z (M, B, D, m)`` and states ``X (M, L, B, n)``."""
+    if model.H is not None:
+        return z[:, None] - np.einsum("ij,mlbj->mlbi", model.H, X)[:, :, :, None, :]
+    hx = np.asarray(model.measurement.h(X, 1), dtype=float)
+    return model.measurement.residual(z[:, None], hx[:, :, :, None, :])
 
 
 def _gather_step(a: np.ndarray, index: np.ndarray) -> np.ndarray:
@@ -467,10 +491,10 @@ class PMHTTracker(TrackerBase):
         super().__post_init__()
         motion = getattr(self.filter, "motion", None)
         measurement = getattr(self.filter, "measurement", None)
-        if not callable(getattr(motion, "transition_matrix", None)) or not callable(getattr(measurement, "matrix", None)):
+        if not callable(getattr(motion, "transition_matrix", None)) or not callable(getattr(measurement, "h", None)):
             raise ValueError(
-                f"filter: {type(self).__name__} needs linear motion and measurement models (a KalmanFilter); "
-                f"got {type(self.filter).__name__}"
+                f"filter: {type(self).__name__} needs a linear motion model (transition_matrix) and a measurement "
+                f"model with h; got {type(self.filter).__name__}"
             )
         positive_int("batch", self.batch)
         positive_int("max_iter", self.max_iter)
