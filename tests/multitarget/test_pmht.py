@@ -280,5 +280,9 @@ def test_bad_inputs_name_the_field():
         PMHTTracker(pu.UnscentedKalmanFilter(pu.models.CoordinatedTurn(), pu.models.RangeBearing(np.zeros(2), 1.0, 0.01)), 0.9, 1e-3)
     with pytest.raises(ValueError, match="z"):
         tracker().track(np.zeros((3, 2, 2)))
+    with pytest.raises(ValueError, match="z"):
+        tracker().track(np.zeros((3, 2, 2, 3)))
+    with pytest.raises(ValueError, match="z"):
+        tracker().track(np.array([[[[1.0, np.nan]]]]))
     with pytest.raises(ValueError, match="times"):
         tracker().track(np.zeros((3, 1, 1, 2)), times=[0.0, 2.0, 1.0])

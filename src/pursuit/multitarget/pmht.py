@@ -539,6 +539,8 @@ class PMHTTracker(TrackerBase):
             raise ValueError("times: initiation needs scan times when the motion model has no dt")
         dts = [None if times is None or k == 1 else float(times[k - 1] - times[k - 2]) for k in range(1, K + 1)]
         model = linear_model(motion, filt.measurement, dts, self._inputs())
+        if m != model.R.shape[0]:
+            raise ValueError(f"z: the sensor gives {model.R.shape[0]}-component detections, got {m}")
         n = model.F.shape[-1]
 
         if initial is not None:
