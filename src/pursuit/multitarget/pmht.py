@@ -300,6 +300,7 @@ def em_window(
         else:  # linearised at the current states: z̃ = H x̄ + Σ_r w (z_r ⊖ h(x̄)) / W
             Xr = X[r]
             H = np.asarray(measurement_jacobian(model.measurement, Xr, 1), dtype=float)
+            H = np.broadcast_to(H, (*Xr.shape[:-1], *H.shape[-2:]))  # a shared Jacobian, per slot and step
             nu = np.einsum("mlbd,mlbdi->mlbi", wr, _residuals(model, zt[r], Xr)) / np.where(W > 0, W, 1.0)[..., None]
             zs = np.einsum("mlbij,mlbj->mlbi", H, Xr) + nu
         new = _smooth(model, pm, pc, ar, ar & (W > 0), zs, W, ubar[r], H)
