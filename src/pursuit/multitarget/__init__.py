@@ -5,8 +5,10 @@ Specification: ``docs/spec/05-multi-target-pmht.md`` (§1 detections, §4 tracke
 
 from .association import jpda_marginals
 from .detections import CLUTTER, PADDING, MultiTargetTruth, Scans, pad_scans
+from .epmht import EPMHTTracker
 from .gnn import GNNTracker
 from .jpda import JPDATracker
+from .pmht import PMHTResult, PMHTTracker
 from .metrics import (
     Gospa,
     RunAverage,
@@ -27,10 +29,13 @@ __all__ = [
     "PADDING",
     "Scans",
     "pad_scans",
+    "EPMHTTracker",
     "GNNTracker",
     "Gospa",
     "JPDATracker",
     "MultiTrackResult",
+    "PMHTResult",
+    "PMHTTracker",
     "RunAverage",
     "ScanTracks",
     "TrackCounts",
