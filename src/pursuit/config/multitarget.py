@@ -14,7 +14,9 @@ from __future__ import annotations
 from typing import Any
 
 from ..multitarget.gnn import GNNTracker
+from ..multitarget.epmht import EPMHTTracker
 from ..multitarget.jpda import JPDATracker
+from ..multitarget.pmht import PMHTTracker
 from ..registry import Param, params_from, register
 from ..scenarios.multitarget import MultiTargetScenario, crossing, maneuvering_radar, williams15
 from .build import build_filter
@@ -154,3 +156,52 @@ def _gnn(scenario, where: str = "tracker", **kw):
 )
 def _jpda(scenario, where: str = "tracker", **kw):
     return _build_tracker(JPDATracker, scenario, where, **kw)
+
+
+_PMHT_DOCS = {
+    "batch": "scans per EM window (sliding by one scan)",
+    "max_iter": "largest number of EM iterations per window",
+    "tol": "stop EM when the log-likelihood's relative change is at most this",
+    "estimate_priors": "re-estimate the assignment priors at each M-step (default: fixed, from the expected counts)",
+    "hit_weight": "a track's weight W at the newest scan at or above which the scan counts as a hit",
+}
+
+
+def _volume_for(scenario: Any, kw: dict[str, Any]) -> dict[str, Any]:
+    # PMHT's clutter prior needs V; a simulated scenario knows it (recorded data must give estimate_priors=false)
+    if kw.get("estimate_priors") and getattr(scenario, "clutter_volume", None) is not None:
+        kw["volume"] = scenario.clutter_volume
+    return kw
+
+
+@register(
+    "tracker",
+    "pmht",
+    "Probabilistic multi-hypothesis tracker: EM over a sliding window of scans, a smoother per track (KF per-track filter)",
+    params=(*_tracker_params(PMHTTracker), *params_from(PMHTTracker, list(_PMHT_DOCS), docs=_PMHT_DOCS)),
+    target=PMHTTracker,
+)
+def _pmht(scenario, where: str = "tracker", **kw):
+    return _build_tracker(PMHTTracker, scenario, where, **_volume_for(scenario, kw))
+
+
+@register(
+    "tracker",
+    "epmht",
+    "PMHT for maneuvering targets: the maneuver input as a Markov chain estimated inside EM (levels per axis)",
+    params=(
+        *_tracker_params(EPMHTTracker),
+        *params_from(EPMHTTracker, list(_PMHT_DOCS), docs=_PMHT_DOCS),
+        *params_from(
+            EPMHTTracker,
+            ["levels", "stay"],
+            types={"levels": "vector"},
+            docs={"levels": "the maneuver input's levels per axis (acceleration units)", "stay": "the Markov chain's probability of keeping its level"},
+        ),
+    ),
+    target=EPMHTTracker,
+)
+def _epmht(scenario, where: str = "tracker", **kw):
+    if "levels" in kw:
+        kw["levels"] = tuple(float(v) for v in kw["levels"])
+    return _build_tracker(EPMHTTracker, scenario, where, **_volume_for(scenario, kw))
