@@ -274,8 +274,7 @@ class GMPHDTracker:
             cov = np.concatenate([cov, bcov], axis=1)
             label = np.concatenate([label, blabel], axis=1)
 
-            w, mean, cov, label, explained = self._update(filt, w, mean, cov, label, z[k - 1], k, dt, rng)
-            out_count[k - 1] = w.sum(axis=1)
+            w, mean, cov, label, explained, out_count[k - 1] = self._update(filt, w, mean, cov, label, z[k - 1], k, dt, rng)
             w, mean, cov, label = prune_merge(w, mean, cov, label, self.prune, self.merge, self.max_components)
             out_comp[k - 1] = (w > 0).sum(axis=1)
             est_mean, est_cov, est_label, out_drop[k - 1] = extract_estimates(w, mean, cov, label, self.extract, L)
@@ -291,18 +290,19 @@ class GMPHDTracker:
     # ------------------------------------------------------------------
     def _update(
         self, filt: Any, w: np.ndarray, mean: np.ndarray, cov: np.ndarray, label: np.ndarray, z: np.ndarray, k: int, dt: float | None, rng: RNGLike
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, ...]:
         """Predict and update a mixture ``(M, C)`` with one scan ``(M, D, m)``.
 
-        Returns the candidates ``(M, C (1 + D))`` (missed components first,
-        then each component updated by each detection) and ``a(z) (M, D)``,
-        the weight each detection gave the components.
+        Returns the candidates above the pruning threshold (each component
+        missed, and updated by each detection), heaviest first, as ``(M, J)``
+        arrays padded with weight 0; ``a(z) (M, D)``, the weight each
+        detection gave the components; and ``(M,)`` Σ w before pruning.
         """
         M, C = w.shape
         D = z.shape[1]
         alive = w > 0
         if C == 0:  # nothing to update (no component yet)
-            return w, mean, cov, label, np.zeros((M, D))
+            return w, mean, cov, label, np.zeros((M, D)), np.zeros(M)
         state = filt.init(Gaussian(mean, cov), batch=(M, C), rng=rng)
         hyp = evaluate_hypotheses(filt, state, z, alive, 0.99, k, dt)
         pred_mean, pred_cov = hyp.missed.mean, np.broadcast_to(hyp.missed.cov, (M, C, *cov.shape[-2:]))
@@ -314,18 +314,31 @@ class GMPHDTracker:
         w_pair = np.exp(log_num - top[:, None, :]) / den[:, None, :]  # 0 where not paired
         explained = w_pair.sum(axis=1)  # (M, D)
 
-        n = mean.shape[-1]
-        up_mean = np.zeros((M, C, D, n))
-        up_cov = np.broadcast_to(np.eye(n), (M, C, D, n, n)).copy()
-        if hyp.states is not None:
-            up_mean[hyp.runs, hyp.tracks, hyp.dets] = hyp.states.mean
-            up_cov[hyp.runs, hyp.tracks, hyp.dets] = np.broadcast_to(hyp.states.cov, (hyp.runs.size, n, n))
         w_miss = np.where(alive, (1.0 - self.p_detect) * w, 0.0)
-        cand_w = np.concatenate([w_miss, w_pair.reshape(M, C * D)], axis=1)
-        cand_mean = np.concatenate([np.where(alive[..., None], pred_mean, 0.0), up_mean.reshape(M, C * D, n)], axis=1)
-        cand_cov = np.concatenate([np.where(alive[..., None, None], pred_cov, np.eye(n)), up_cov.reshape(M, C * D, n, n)], axis=1)
-        cand_label = np.concatenate([label, np.repeat(label, D, axis=1)], axis=1)
-        return cand_w, cand_mean, cand_cov, cand_label, explained
+        cand_w = np.concatenate([w_miss, w_pair.reshape(M, C * D)], axis=1)  # missed first, then (c, d) c-major
+        total = cand_w.sum(axis=1)
+        # Pruning here, before any state is copied: only the candidates above T are gathered, heaviest first.
+        keep = cand_w > self.prune
+        width = int(keep.sum(axis=1).max(initial=0))
+        order = np.argsort(np.where(keep, -cand_w, np.inf), axis=1, kind="stable")[:, :width]
+        kept = np.take_along_axis(keep, order, axis=1)
+        out_w = np.where(kept, np.take_along_axis(cand_w, order, axis=1), 0.0)
+        missed = order < C
+        comp = np.where(missed, order, (order - C) // D)  # the parent component
+        det = np.where(missed, 0, (order - C) % D)
+        rows = np.arange(M)[:, None]
+        n = mean.shape[-1]
+        out_mean = np.where(missed[..., None], hyp.missed.mean[rows, comp], 0.0)
+        pred_cov = np.broadcast_to(hyp.missed.cov, (M, C, n, n))
+        out_cov = np.where(missed[..., None, None], pred_cov[rows, comp], np.eye(n))
+        flat = np.where(missed | ~kept, -1, hyp.pair[rows, comp, det])
+        if hyp.states is not None and (flat >= 0).any():
+            r, c = np.nonzero(flat >= 0)
+            out_mean[r, c] = hyp.states.mean[flat[r, c]]
+            out_cov[r, c] = np.broadcast_to(hyp.states.cov, (hyp.runs.size, n, n))[flat[r, c]]
+        out_cov = np.where(kept[..., None, None], out_cov, np.eye(n))
+        out_label = np.where(kept, label[rows, comp], -1)
+        return out_w, out_mean, out_cov, out_label, explained, total
 
     def _fixed_births(self, M: int, next_label: np.ndarray) -> tuple[np.ndarray, ...]:
         """The fixed birth components ``(M, B)``, weight ``birth_rate / B`` each, fresh labels."""
@@ -459,22 +472,30 @@ def prune_merge(
     out_label = np.full((M, width), -1, dtype=np.int64)
     ar = np.arange(M)
     for r in range(width):
-        if not remaining.any():
+        left = remaining.sum(axis=1)
+        if not left.any():
             break
-        active = remaining.any(axis=1)
+        if 2 * left.max() <= remaining.shape[1]:
+            # Drop the merged columns (the rest keep their heaviest-first order): the rounds get cheaper.
+            keep = np.argsort(~remaining, axis=1, kind="stable")[:, : left.max()]
+            w, remaining, label = (np.take_along_axis(a, keep, axis=1) for a in (w, remaining, label))
+            mean = np.take_along_axis(mean, keep[..., None], axis=1)
+            cov, inv = (np.take_along_axis(a, keep[..., None, None], axis=1) for a in (cov, inv))
+        active = left > 0
         j = np.argmax(np.where(remaining, w, -np.inf), axis=1)  # the heaviest remaining (first of equals)
         diff = mean - mean[ar, j][:, None, :]
-        d2 = np.einsum("mci,mcij,mcj->mc", diff, inv, diff)
-        group = remaining & (d2 <= merge) & active[:, None]
+        d2 = np.sum(diff * np.matmul(inv, diff[..., None])[..., 0], axis=-1)
+        group = remaining & (d2 <= merge)
         gw = np.where(group, w, 0.0)
         total = gw.sum(axis=1)
         safe = np.where(active, total, 1.0)
-        m = np.einsum("mc,mci->mi", gw, mean) / safe[:, None]
+        m = np.matmul(gw[:, None, :], mean)[:, 0] / safe[:, None]
         spread = mean - m[:, None, :]
-        P = (np.einsum("mc,mcij->mij", gw, cov) + np.einsum("mc,mci,mcj->mij", gw, spread, spread)) / safe[:, None, None]
+        S = np.matmul(gw[:, None, :], cov.reshape(M, -1, n * n))[:, 0].reshape(M, n, n)
+        S += np.matmul(np.swapaxes(spread * gw[..., None], 1, 2), spread)
         out_w[:, r] = np.where(active, total, 0.0)
         out_mean[:, r] = np.where(active[:, None], m, 0.0)
-        out_cov[:, r] = np.where(active[:, None, None], P, np.eye(n))
+        out_cov[:, r] = np.where(active[:, None, None], S / safe[:, None, None], np.eye(n))
         out_label[:, r] = np.where(active, label[ar, j], -1)
         remaining &= ~group
     # The cap: the J_max heaviest.
