@@ -1,10 +1,11 @@
 """Multi-target tracking: detections, trackers and metrics, batched over Monte Carlo runs.
 
-Specification: ``docs/spec/05-multi-target-pmht.md`` (§1 detections, §4 trackers, §5 metrics).
+Specification: ``docs/spec/05-multi-target-pmht.md`` (§1 detections, §4 trackers and GM-PHD, §5 metrics).
 """
 
 from .association import jpda_marginals
 from .detections import CLUTTER, PADDING, MultiTargetTruth, Scans, pad_scans
+from .gmphd import GMPHDResult, GMPHDTracker
 from .gnn import GNNTracker
 from .jpda import JPDATracker
 from .metrics import (
@@ -27,6 +28,8 @@ __all__ = [
     "PADDING",
     "Scans",
     "pad_scans",
+    "GMPHDResult",
+    "GMPHDTracker",
     "GNNTracker",
     "Gospa",
     "JPDATracker",
