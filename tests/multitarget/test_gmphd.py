@@ -140,6 +140,18 @@ def test_same_seed_same_bits():
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
 
 
+def test_scan_times_equal_to_the_model_step_change_nothing():
+    truth, z = cluttered_scene(runs=2, K=15)
+    tracker = phd()
+    a = tracker.track(z)
+    b = tracker.track(z, times=10.0 + np.arange(15.0))
+    np.testing.assert_array_equal(a.label, b.label)
+    np.testing.assert_allclose(a.mean, b.mean, rtol=1e-12, atol=1e-12)
+    # a longer gap is a different prediction
+    c = tracker.track(z, times=np.arange(15.0) * 1.5)
+    assert not np.allclose(np.nan_to_num(a.mean), np.nan_to_num(c.mean))
+
+
 def test_component_cap_and_estimate_slots_hold():
     truth, z = cluttered_scene(runs=3, K=20)
     res = phd(max_components=5, capacity=2).track(z)

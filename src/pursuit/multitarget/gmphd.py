@@ -248,7 +248,7 @@ class GMPHDTracker:
             if times.shape != (K,) or np.any(np.diff(times) <= 0):
                 raise ValueError(f"times: expected {K} increasing scan times, got shape {times.shape}")
         model_dt = getattr(motion, "dt", None)
-        if self.birth == "two-point" and times is None and model_dt is None:
+        if isinstance(self.birth, str) and self.birth == "two-point" and times is None and model_dt is None:
             raise ValueError("times: two-point births need scan times when the motion model has no dt")
         n = int(getattr(motion, "dim", 0) or 0)
         w, mean, cov, label, next_label = _initial(initial, M, n)
