@@ -289,7 +289,16 @@ class GMPHDTracker:
 
     # ------------------------------------------------------------------
     def _update(
-        self, filt: Any, w: np.ndarray, mean: np.ndarray, cov: np.ndarray, label: np.ndarray, z: np.ndarray, k: int, dt: float | None, rng: RNGLike
+        self,
+        filt: Any,
+        w: np.ndarray,
+        mean: np.ndarray,
+        cov: np.ndarray,
+        label: np.ndarray,
+        z: np.ndarray,
+        k: int,
+        dt: float | None,
+        rng: RNGLike,
     ) -> tuple[np.ndarray, ...]:
         """Predict and update a mixture ``(M, C)`` with one scan ``(M, D, m)``.
 
@@ -305,7 +314,6 @@ class GMPHDTracker:
             return w, mean, cov, label, np.zeros((M, D)), np.zeros(M)
         state = filt.init(Gaussian(mean, cov), batch=(M, C), rng=rng)
         hyp = evaluate_hypotheses(filt, state, z, alive, 0.99, k, dt)
-        pred_mean, pred_cov = hyp.missed.mean, np.broadcast_to(hyp.missed.cov, (M, C, *cov.shape[-2:]))
         paired = hyp.pair >= 0  # (M, C, D): an alive component and a real detection
         with np.errstate(divide="ignore"):
             log_num = np.where(paired, np.log(self.p_detect) + np.log(w)[..., None] + hyp.loglik, -np.inf)
