@@ -1,11 +1,12 @@
 """Multi-target tracking: detections, trackers and metrics, batched over Monte Carlo runs.
 
-Specification: ``docs/spec/05-multi-target-pmht.md`` (§1 detections, §4 trackers, §5 metrics).
+Specification: ``docs/spec/05-multi-target-pmht.md`` (§1 detections, §4 trackers and GM-PHD, §5 metrics).
 """
 
 from .association import jpda_marginals
 from .detections import CLUTTER, PADDING, MultiTargetTruth, Scans, pad_scans
 from .epmht import EPMHTTracker
+from .gmphd import GMPHDResult, GMPHDTracker
 from .gnn import GNNTracker
 from .jpda import JPDATracker
 from .pmht import PMHTResult, PMHTTracker
@@ -30,6 +31,8 @@ __all__ = [
     "Scans",
     "pad_scans",
     "EPMHTTracker",
+    "GMPHDResult",
+    "GMPHDTracker",
     "GNNTracker",
     "Gospa",
     "JPDATracker",

@@ -1,0 +1,271 @@
+"""GM-PHD filter: spec 05 §7 checks, pruning/merging and extraction by hand, bad parameters."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pursuit as pu
+from pursuit.filters import InteractingMultipleModel
+from pursuit.gaussian import Gaussian
+from pursuit.models import ConstantVelocity, LinearGaussian
+from pursuit.multitarget.gmphd import GMPHDTracker, extract_estimates, prune_merge
+from pursuit.scenarios import MultiTargetScenario, Target
+
+from ._checks import CLUTTER_DENSITY, cluttered_scene, kf, nearest_errors, range_bearing_scene
+from ._scenes import simulate
+
+PRIOR = Gaussian(np.array([0.5, 0.8, -0.3, 0.4]), np.diag([4.0, 1.0, 4.0, 1.0]))
+
+
+def phd(filt=None, p_detect=0.9, density=CLUTTER_DENSITY, **kw):
+    kw.setdefault("max_speed", 3.0)
+    return GMPHDTracker(filt or kf(), p_detect, density, **kw)
+
+
+# ----------------------------------------------------------------------
+# spec 05 §7
+# ----------------------------------------------------------------------
+def test_expected_count_tracks_the_truth_without_clutter():
+    """P_D = 1, no clutter, targets born and dying: Σ w equals the true count once births have had two scans.
+
+    Tolerance: |Σ w − N| ≤ 0.01 at every such scan of every run (seeded; the
+    only slack is κ / (P_D q(z)) per target with κ = 1e-9, and p_S < 1 on a
+    target that has just died, which P_D = 1 removes at once).
+    """
+    cv = ConstantVelocity(ndim=2, dt=1.0, q=0.05)
+    scenario = MultiTargetScenario(
+        targets=(
+            Target([0.0, 1.0, 0.0, 0.5]),
+            Target([200.0, -1.0, 0.0, 1.0], death=25),
+            Target([0.0, 0.5, 200.0, -1.0], birth=10),
+        ),
+        motion=cv,
+        measurement=LinearGaussian.position(4, cv.position_indices, 1.0),
+        clutter_region=[[-50.0, 250.0], [-50.0, 250.0]],
+        clutter_rate=0.0,
+        p_detect=1.0,
+        steps=35,
+    )
+    truth, scans = scenario.simulate(np.random.default_rng(3), runs=10)
+    res = phd(pu.KalmanFilter(cv, scenario.measurement), p_detect=1.0, density=1e-9, max_speed=10.0).track(scans.z)
+    count = truth.count
+    steady = np.zeros_like(count, dtype=bool)
+    steady[2:] = (count[2:] == count[1:-1]) & (count[1:-1] == count[:-2])  # no birth in the last two scans
+    assert steady.sum() > 250
+    np.testing.assert_allclose(res.expected_count[steady], count[steady], atol=0.01)
+    # and the extracted estimates are that many, next to the targets
+    assert ((res.label >= 0).sum(axis=-1)[steady] == count[steady]).all()
+
+
+def test_single_target_given_birth_equals_the_kalman_filter():
+    """One target, no clutter, P_D = 1, birth at the truth's prior: the estimate is the KF's (1e-9)."""
+    filt = kf()
+    truth, z = simulate([[0.0, 1.0, 0.0, 0.5]], 30, 4, 1, shuffle=False)
+    want = pu.run(filt, z[:, :, 0], PRIOR)
+    # a fixed birth at the prior: the first scan's estimate is the KF's
+    res = phd(filt, 1.0, 1e-12, birth=Gaussian(PRIOR.mean[None], PRIOR.cov[None]), birth_rate=1.0).track(z)
+    np.testing.assert_allclose(res.mean[0, :, 0], want.mean[0], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(res.cov[0, :, 0], want.cov[0], rtol=1e-9, atol=1e-12)
+    assert (res.label[0, :, 0] == 0).all() and (res.label[0, :, 1:] == -1).all()
+    # the prior as an initial component and no births: the KF at every scan, one label throughout
+    res = phd(filt, 1.0, 1e-12, birth=None, p_survive=1.0).track(z, initial=Gaussian(PRIOR.mean[None], PRIOR.cov[None]))
+    np.testing.assert_allclose(res.mean[:, :, 0], want.mean, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(res.cov[:, :, 0], want.cov, rtol=1e-9, atol=1e-12)
+    assert (res.label[:, :, 0] == 0).all() and (res.label[:, :, 1:] == -1).all()
+    np.testing.assert_allclose(res.expected_count, 1.0, atol=1e-4)
+
+
+def test_unscented_range_bearing_single_target_equals_the_ukf():
+    """The update is the component filter's own step: with a UKF on a radar it is the UKF."""
+    cv, rb, _, _, _ = range_bearing_scene()
+    truth, z = simulate([[150.0, 1.0, 100.0, 0.5]], 20, 3, 4, motion=cv, measurement=rb, shuffle=False)
+    prior = Gaussian(np.array([150.0, 1.0, 100.0, 0.5]), np.diag([25.0, 1.0, 25.0, 1.0]))
+    ukf = pu.UnscentedKalmanFilter(cv, rb)
+    want = pu.run(ukf, z[:, :, 0], prior)
+    res = phd(ukf, 1.0, 1e-12, birth=None, p_survive=1.0).track(z, initial=Gaussian(prior.mean[None], prior.cov[None]))
+    np.testing.assert_allclose(res.mean[:, :, 0], want.mean, rtol=1e-9, atol=1e-9)
+
+
+def test_tracks_crossing_targets_in_clutter_from_nothing():
+    truth, z = cluttered_scene()
+    res = phd().track(z)
+    err = nearest_errors(res, truth)[8:]
+    # a missed detection drops a component's weight to about 1 − P_D, below 0.5 (the GM-PHD's known weakness)
+    assert (err < 4.0).mean() > 0.85
+    assert (res.label[8:] >= 0).sum(axis=-1).mean() < 3.3
+
+
+def test_range_bearing_with_an_ekf_from_nothing():
+    cv, rb, truth, z, density = range_bearing_scene()
+    res = phd(pu.ExtendedKalmanFilter(cv, rb), 0.9, density, max_speed=4.0).track(z)
+    err = nearest_errors(res, truth)[10:]
+    assert (err < 5.0).mean() > 0.85
+    assert (res.label[10:] >= 0).sum(axis=-1).mean() < 2.5
+
+
+@pytest.mark.parametrize("birth", ["two-point", "one-point"])
+def test_order_of_detections_within_a_scan_does_not_matter(birth):
+    truth, z = cluttered_scene(runs=4, K=30)
+    tracker = phd(birth=birth)
+    a = tracker.track(z)
+    rng = np.random.default_rng(4)
+    zp = z.copy()
+    for k in range(z.shape[0]):
+        for m in range(z.shape[1]):
+            zp[k, m] = z[k, m][rng.permutation(z.shape[2])]
+    b = tracker.track(zp)
+    np.testing.assert_array_equal(a.label, b.label)
+    np.testing.assert_allclose(a.mean, b.mean, rtol=1e-12, atol=1e-10)
+    np.testing.assert_allclose(a.cov, b.cov, rtol=1e-12, atol=1e-10)
+    np.testing.assert_allclose(a.expected_count, b.expected_count, rtol=1e-12)
+
+
+def test_batch_equals_one_run_at_a_time():
+    truth, z = cluttered_scene(runs=4, K=30)
+    tracker = phd()
+    whole = tracker.track(z)
+    for m in range(z.shape[1]):
+        one = tracker.track(z[:, m : m + 1])
+        np.testing.assert_array_equal(one.label[:, 0], whole.label[:, m])
+        np.testing.assert_allclose(one.mean[:, 0], whole.mean[:, m], rtol=1e-12, atol=1e-10)
+        np.testing.assert_allclose(one.expected_count[:, 0], whole.expected_count[:, m], rtol=1e-12)
+
+
+def test_same_seed_same_bits():
+    tracker = phd()
+    a = tracker.track(cluttered_scene(runs=3, K=25, seed=8)[1])
+    b = tracker.track(cluttered_scene(runs=3, K=25, seed=8)[1])
+    for name in ("mean", "cov", "label", "confirmed", "dropped", "expected_count", "components"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+def test_scan_times_equal_to_the_model_step_change_nothing():
+    truth, z = cluttered_scene(runs=2, K=15)
+    tracker = phd()
+    a = tracker.track(z)
+    b = tracker.track(z, times=10.0 + np.arange(15.0))
+    np.testing.assert_array_equal(a.label, b.label)
+    np.testing.assert_allclose(a.mean, b.mean, rtol=1e-12, atol=1e-12)
+    # a longer gap is a different prediction
+    c = tracker.track(z, times=np.arange(15.0) * 1.5)
+    assert not np.allclose(np.nan_to_num(a.mean), np.nan_to_num(c.mean))
+
+
+def test_component_cap_and_estimate_slots_hold():
+    truth, z = cluttered_scene(runs=3, K=20)
+    res = phd(max_components=5, capacity=2).track(z)
+    assert res.components.max() <= 5
+    assert res.mean.shape[2] == 2
+    assert ((res.label >= 0).sum(axis=-1) + res.dropped >= 3)[10:].mean() > 0.8  # three targets, two slots
+
+
+# ----------------------------------------------------------------------
+# pruning, merging, extraction by hand
+# ----------------------------------------------------------------------
+def test_prune_merge_by_hand():
+    # run 0: two clusters and one component to prune; run 1: everything below T
+    w = np.array([[0.5, 0.3, 0.2, 1e-6, 0.4], [1e-6, 2e-6, 0.0, 0.0, 0.0]])
+    mean = np.array([[0.0, 1.0, 10.0, 0.5, 10.5], [0.0, 0.0, 0.0, 0.0, 0.0]])[..., None]
+    cov = np.array([[1.0, 1.0, 1.0, 1.0, 4.0], [1.0] * 5])[..., None, None]
+    label = np.array([[7, 8, 9, 10, 11], [1, 2, -1, -1, -1]])
+    out_w, out_m, out_P, out_l = prune_merge(w, mean, cov, label, 1e-5, 4.0, 100)
+    # heaviest 0.5 at 0: takes 1 (d² = 1); 10 (d² = 100) and 10.5 (d² = 110.25 / 4) stay; 0.5 is pruned
+    m1 = (0.5 * 0.0 + 0.3 * 1.0) / 0.8
+    P1 = (0.5 * (1.0 + m1**2) + 0.3 * (1.0 + (1.0 - m1) ** 2)) / 0.8
+    # then 0.4 at 10.5: takes 10, measured with its own P = 1 (d² = 0.25)
+    m2 = (0.2 * 10.0 + 0.4 * 10.5) / 0.6
+    P2 = (0.2 * (1.0 + (10.0 - m2) ** 2) + 0.4 * (4.0 + (10.5 - m2) ** 2)) / 0.6
+    np.testing.assert_allclose(out_w, [[0.8, 0.6], [0.0, 0.0]], rtol=1e-15)
+    np.testing.assert_allclose(out_m[0, :, 0], [m1, m2], rtol=1e-14)
+    np.testing.assert_allclose(out_P[0, :, 0, 0], [P1, P2], rtol=1e-14)
+    np.testing.assert_array_equal(out_l, [[7, 11], [-1, -1]])
+    # the cap keeps the heaviest
+    out_w, out_m, _, out_l = prune_merge(w, mean, cov, label, 1e-5, 4.0, 1)
+    np.testing.assert_allclose(out_w, [[0.8], [0.0]])
+    np.testing.assert_array_equal(out_l, [[7], [-1]])
+    # U = 0.2: nothing merges; sorted heaviest first
+    out_w, out_m, _, out_l = prune_merge(w, mean, cov, label, 1e-5, 0.2, 100)
+    np.testing.assert_allclose(out_w[0], [0.5, 0.4, 0.3, 0.2])
+    np.testing.assert_array_equal(out_l[0], [7, 11, 8, 9])
+
+
+def test_prune_merge_two_dimensional_matches_moments():
+    rng = np.random.default_rng(2)
+    n, C = 3, 6
+    mean = rng.normal(0.0, 0.1, (1, C, n))  # all within U of the heaviest
+    A = rng.normal(size=(1, C, n, n))
+    cov = A @ np.swapaxes(A, -1, -2) + np.eye(n)
+    w = rng.uniform(0.1, 1.0, (1, C))
+    label = np.arange(C)[None]
+    out_w, out_m, out_P, out_l = prune_merge(w, mean, cov, label, 1e-5, 1e6, 100)
+    W = w.sum()
+    m = (w[0, :, None] * mean[0]).sum(0) / W
+    P = sum(w[0, i] * (cov[0, i] + np.outer(mean[0, i] - m, mean[0, i] - m)) for i in range(C)) / W
+    np.testing.assert_allclose(out_w, [[W]])
+    np.testing.assert_allclose(out_m[0, 0], m, rtol=1e-13)
+    np.testing.assert_allclose(out_P[0, 0], P, rtol=1e-13)
+    assert out_l[0, 0] == int(np.argmax(w))
+
+
+def test_extract_estimates_by_hand():
+    w = np.array([[1.6, 0.5, 0.49, 2.2], [0.0, 0.0, 0.0, 0.0]])
+    mean = np.arange(8.0).reshape(2, 4, 1)
+    cov = np.ones((2, 4, 1, 1))
+    label = np.array([[3, 4, 5, 6], [-1, -1, -1, -1]])
+    m, P, lab, dropped = extract_estimates(w, mean, cov, label, 0.5, 4)
+    # 1.6 → 2, 0.5 → 1, 0.49 → 0, 2.2 → 2: five estimates, one beyond the four slots
+    np.testing.assert_array_equal(lab, [[3, 3, 4, 6], [-1, -1, -1, -1]])
+    np.testing.assert_array_equal(m[0, :, 0], [0.0, 0.0, 1.0, 3.0])
+    assert np.isnan(m[1]).all() and np.isnan(P[1]).all()
+    np.testing.assert_array_equal(dropped, [1, 0])
+
+
+# ----------------------------------------------------------------------
+# bad input
+# ----------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "field, kwargs",
+    [
+        ("p_detect", {"p_detect": 0.0}),
+        ("p_detect", {"p_detect": 1.5}),
+        ("clutter_density", {"density": 0.0}),
+        ("p_survive", {"p_survive": 0.0}),
+        ("p_survive", {"p_survive": 1.2}),
+        ("birth", {"birth": "three-point"}),
+        ("birth", {"birth": Gaussian(np.zeros((2, 3)), np.eye(3))}),
+        ("birth_rate", {"birth_rate": 0.0}),
+        ("velocity_sigma", {"velocity_sigma": -1.0}),
+        ("prune", {"prune": 1.0}),
+        ("prune", {"prune": -1e-5}),
+        ("merge", {"merge": 0.0}),
+        ("max_components", {"max_components": 0}),
+        ("max_components", {"max_components": 2.5}),
+        ("extract", {"extract": 0.0}),
+        ("capacity", {"capacity": 0}),
+        ("max_speed", {"max_speed": None}),
+        ("max_speed", {"max_speed": -3.0}),
+        ("position", {"position": "x"}),
+    ],
+)
+def test_bad_parameters_name_the_field(field, kwargs):
+    with pytest.raises(ValueError, match=f"^{field}:"):
+        phd(**kwargs)
+
+
+def test_bad_filter_and_input_name_the_field():
+    cv, meas = kf().motion, kf().measurement
+    imm = InteractingMultipleModel([pu.KalmanFilter(cv, meas), pu.KalmanFilter(cv, meas)], np.array([[0.9, 0.1], [0.1, 0.9]]))
+    with pytest.raises(ValueError, match="^filter:"):
+        phd(imm)
+    tracker = phd()
+    with pytest.raises(ValueError, match="^z:"):
+        tracker.track(np.zeros((3, 2, 2)))
+    z = np.zeros((3, 1, 2, 2))
+    z[0, 0, 0, 0] = np.nan
+    with pytest.raises(ValueError, match="^z:"):
+        tracker.track(z)
+    with pytest.raises(ValueError, match="^times:"):
+        tracker.track(np.zeros((3, 1, 2, 2)), times=[0.0, 2.0, 1.0])
+    with pytest.raises(ValueError, match="^initial:"):
+        phd(birth=None).track(np.zeros((3, 2, 2, 2)), initial=Gaussian(np.zeros((3, 2, 4)), np.eye(4)))
