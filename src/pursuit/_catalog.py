@@ -56,7 +56,10 @@ CATALOG: dict[str, list[tuple[str, str]]] = {
         ('wsn-range', '2-D constant-velocity target ranged by fixed WSN anchors; state [x, vx, y, vy]'),
     ],
     'tracker': [
+        ('epmht', 'PMHT for maneuvering targets: the maneuver input as a Markov chain estimated inside EM (levels per axis)'),
+        ('gmphd', 'Gaussian-mixture PHD filter (Vo & Ma 2006): pruning, merging, estimates of weight >= extract, labels by tags'),
         ('gnn', 'Global nearest neighbour: 2-D assignment per scan within a chi-square gate'),
         ('jpda', 'Joint probabilistic data association: exact joint events within clusters, moment-matched update'),
+        ('pmht', 'Probabilistic multi-hypothesis tracker: EM over a sliding window of scans, a smoother per track (KF per-track filter)'),
     ],
 }

@@ -53,7 +53,11 @@ def test_mt_crossing_reproduces_with_table_and_figures(tmp_path, capsys):
     folder = out / "mt-crossing"
     with (folder / "summary.csv").open() as fh:
         rows = list(csv.DictReader(fh))
-    assert [r["tracker"] for r in rows] == ["GNN-KF", "JPDA-KF"]
+    assert [r["tracker"] for r in rows] == ["GNN-KF", "JPDA-KF", "PMHT", "EPMHT", "GM-PHD"]
+    # the EM trackers report their iterations per window, within max_iter; the others leave it empty
+    em = {r["tracker"]: r["em_iterations"] for r in rows}
+    assert em["GNN-KF"] == em["GM-PHD"] == ""
+    assert 1 <= float(em["PMHT"]) <= 20 and 1 <= float(em["EPMHT"]) <= 20
     for r in rows:
         # GOSPA with c = 5, p = 2, alpha = 2 is at most c * sqrt(n / 2) for n objects (here 2 truths and a few tracks)
         assert 0 < float(r["gospa"]) < 5 * np.sqrt(8)
@@ -104,6 +108,9 @@ def test_same_seed_same_table(tmp_path):
         (('type = "gnn"', 'type = "gnn"\nfilter = {type = "pf"}'), "trackers[0].filter"),
         (("steps = 8", "steps = 8\nclutter_rate = -2.0"), "scenario.clutter_rate"),
         (("[metrics]", "[filters]"), "filters: unknown section"),
+        (('type = "jpda"', 'type = "gmphd"\nbirth = "fixed"'), "trackers[1].birth: must be one of"),
+        (('type = "jpda"', 'type = "pmht"\nbatch = 0'), "trackers[1].batch"),
+        (('type = "jpda"', 'type = "epmht"\nstay = 1.5'), "trackers[1].stay"),
     ],
 )
 def test_bad_configs_fail_naming_the_field(tmp_path, edit, message):

@@ -15,6 +15,7 @@ from typing import Any
 
 from ..multitarget.gnn import GNNTracker
 from ..multitarget.epmht import EPMHTTracker
+from ..multitarget.gmphd import BIRTH_MODES, GMPHDTracker
 from ..multitarget.jpda import JPDATracker
 from ..multitarget.pmht import PMHTTracker
 from ..registry import Param, params_from, register
@@ -205,3 +206,42 @@ def _epmht(scenario, where: str = "tracker", **kw):
     if "levels" in kw:
         kw["levels"] = tuple(float(v) for v in kw["levels"])
     return _build_tracker(EPMHTTracker, scenario, where, **_volume_for(scenario, kw))
+
+
+@register(
+    "tracker",
+    "gmphd",
+    "Gaussian-mixture PHD filter (Vo & Ma 2006): pruning, merging, estimates of weight >= extract, labels by tags",
+    params=(
+        Param("name", "str", "", "label in tables and figures (default: GMPHD-<filter>)"),
+        Param("filter", "any", {"type": "kf"}, "the component filter table {type = ...}, built against the scenario's models", own=True, check=_filter_table),
+        Param("p_detect", "float", None, "detection probability the filter assumes (default: the scenario's)", own=True, check=_p_detect),
+        Param("clutter_density", "float", None, "false alarms per scan per unit measurement volume the filter assumes (default: the scenario's)", own=True),
+        *params_from(
+            GMPHDTracker,
+            ["p_survive", "birth", "birth_rate", "max_speed", "velocity_sigma", "prune", "merge", "max_components", "extract", "capacity"],
+            choices={"birth": BIRTH_MODES},
+            types={"birth": "str"},
+            docs={
+                "p_survive": "probability that a target survives from one scan to the next",
+                "birth": "adaptive births from the detections: two-point (pairs of scans) or one-point (velocity spread)",
+                "birth_rate": "expected number of new targets per scan, shared over the detections",
+                "max_speed": "largest target speed for two-point births (default: the scenario's)",
+                "velocity_sigma": "velocity standard deviation of a one-point birth",
+                "prune": "components lighter than this are dropped",
+                "merge": "components closer than this (squared Mahalanobis distance) are merged",
+                "max_components": "most components kept per run",
+                "extract": "a component of at least this weight gives an estimate",
+                "capacity": "estimate slots per run",
+            },
+        ),
+    ),
+    target=GMPHDTracker,
+)
+def _gmphd(scenario, where: str = "tracker", *, filter, p_detect, clutter_density, max_speed, **kw):
+    filt = build_filter(filter, scenario, f"{where}.filter")
+    p_detect = scenario.p_detect if p_detect is None else p_detect
+    clutter_density = scenario.clutter_density if clutter_density is None else clutter_density
+    if max_speed is None:
+        max_speed = getattr(scenario, "max_speed", None)
+    return _checked(where, lambda: GMPHDTracker(filt, p_detect, clutter_density, max_speed=max_speed, **kw))

@@ -90,6 +90,16 @@ def _mean_ci(values: np.ndarray) -> tuple[float, float]:
     return float(v.mean()), float(1.96 * v.std(ddof=1) / np.sqrt(v.size))
 
 
+def _em_iterations(result: Any) -> float | None:
+    """Mean EM iterations per window of a PMHT-family result; None for trackers without EM."""
+    it = getattr(result, "iterations", None)
+    if it is None:
+        return None
+    it = np.asarray(it, dtype=float)
+    it = it[it > 0]  # scans before a first window, or with no track, ran no EM
+    return float(it.mean()) if it.size else None
+
+
 def summary_table(scores: list[TrackerScore], scenario: Any, runs: int, seed: int, metrics: dict[str, float]) -> Table:
     """Mean GOSPA (with its 95 % interval over runs), its parts, switches, track counts and speed per tracker."""
     rows = []
@@ -103,6 +113,7 @@ def summary_table(scores: list[TrackerScore], scenario: Any, runs: int, seed: in
             sw, sw_ci,
             float(np.mean(s.counts.confirmed)), float(np.mean(s.counts.false)), float(np.mean(s.counts.lost)),
             float(np.mean(s.result.dropped.sum(axis=0))),
+            _em_iterations(s.result),
             s.wall_time, runs * steps / s.wall_time if s.wall_time > 0 else None,
         ])
     c, p, a = metrics["c"], metrics["p"], metrics["alpha"]
@@ -110,7 +121,7 @@ def summary_table(scores: list[TrackerScore], scenario: Any, runs: int, seed: in
         "summary",
         f"{scenario.name}: {runs} runs, seed {seed}; GOSPA c = {c:g}, p = {p:g}, alpha = {a:g}",
         ["tracker", "gospa", "gospa_ci95", "localisation", "missed", "false", "switches", "switches_ci95",
-         "confirmed_tracks", "false_tracks", "lost_truths", "dropped_tracks", "wall_time_s", "scans_per_s"],
+         "confirmed_tracks", "false_tracks", "lost_truths", "dropped_tracks", "em_iterations", "wall_time_s", "scans_per_s"],
         rows,
         notes=(
             "gospa: GOSPA per scan averaged over scans and runs (distance units), with the half-width of its 95 % "
@@ -118,7 +129,8 @@ def summary_table(scores: list[TrackerScore], scenario: Any, runs: int, seed: in
             f"distance^p, averaged over scans and runs (they add up to the mean of GOSPA^p, not of GOSPA). "
             "switches: label changes of the track assigned to a truth, per run. confirmed_tracks: distinct labels "
             "confirmed in a run; false_tracks: those assigned to no truth for more than half their life; "
-            "lost_truths: truths unassigned for more than half their existence. scans_per_s: runs x scans / wall time "
+            "lost_truths: truths unassigned for more than half their existence. em_iterations: mean EM iterations per "
+            "window (PMHT, EPMHT; empty for the others). scans_per_s: runs x scans / wall time "
             "(all runs in one batch, one process)."
         ),
     )

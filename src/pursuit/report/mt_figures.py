@@ -89,10 +89,15 @@ def scene(
         pad = 0.15 * float(np.max(hi - lo)) + 1.0
         view = (lo - pad, hi + pad)
         aspect = float((view[1][1] - view[0][1]) / (view[1][0] - view[0][0]))
-    panel = 4.6
-    height = float(np.clip(panel * aspect + 1.3, 3.4, 6.5))
-    fig = Figure(figsize=(panel * len(names) + 1.2, height), layout="constrained")
-    axes = fig.subplots(1, len(names), sharex=True, sharey=True, squeeze=False)[0]
+    panel = 4.2
+    cols = min(3, len(names))
+    rows = -(-len(names) // cols)
+    height = rows * float(np.clip(panel * aspect + 0.9, 3.0, 6.0)) + 0.4
+    fig = Figure(figsize=(panel * cols + 1.6, height), layout="constrained")
+    grid = fig.subplots(rows, cols, sharex=True, sharey=True, squeeze=False)
+    axes = grid.ravel()[: len(names)]
+    for spare in grid.ravel()[len(names):]:
+        spare.set_visible(False)
     z = scans.z[:, run]  # (K, D, m)
     det = None
     if z.shape[-1] == 2 and to_position is None:
@@ -139,8 +144,9 @@ def scene(
     if view is not None:
         axes[0].set_xlim(view[0][0], view[1][0])
         axes[0].set_ylim(view[0][1], view[1][1])
-    axes[0].set_ylabel("y (m)")
-    legend_beside(axes[-1])
+    for row in grid:
+        row[0].set_ylabel("y (m)")
+    legend_beside(axes[min(cols, len(names)) - 1])
     fig.suptitle(f"{title_prefix + ': ' if title_prefix else ''}run {run}, truth, detections and labelled tracks", fontsize=11)
     return fig
 
