@@ -155,3 +155,20 @@ def test_cli_refuses_a_kappa_without_sigma_points_with_exit_2_and_writes_nothing
     assert len(err) == 1
     assert err[0].startswith(f"pursuit: error: {p}:17: filters[1].kappa: must exceed -n = -4")
     assert list(tmp_path.iterdir()) == [p]
+
+
+@pytest.mark.parametrize(
+    "fading, field",
+    [("1e5", "filters[0].fading: 100000 is beyond 2^13"), ('{type = "constant", lam = 1e300}', "filters[0].fading.lam: 1e+300 is beyond 2^13")],
+)
+def test_a_constant_fading_factor_beyond_the_model_files_limit_is_refused(tmp_path, fading, field):
+    # the limit of model files (docs/track.md), for experiment files too: λ = 1e300 overflowed the EKF's covariance
+    from pursuit.experiment import ConfigError, load_experiment
+
+    path = tmp_path / "e.toml"
+    path.write_text(f'[experiment]\nruns = 2\n[scenario]\ntype = "cv-position"\n[[filters]]\ntype = "kf"\nfading = {fading}\n')
+    with pytest.raises(ConfigError) as info:
+        load_experiment(path)
+    assert field in str(info.value)
+    path.write_text('[experiment]\nruns = 2\n[scenario]\ntype = "cv-position"\n[[filters]]\ntype = "kf"\nfading = 8192\n')
+    load_experiment(path)  # 2^13 itself is accepted

@@ -211,3 +211,18 @@ def test_inverse_of_a_floating_point_singular_4x4_is_the_pseudo_inverse(batched,
         np.testing.assert_array_equal(out[3], pinv)
     else:
         np.testing.assert_array_equal(out, pinv)
+
+
+def test_inv_spd_gives_nan_for_an_overflowed_matrix_and_inverts_the_rest():
+    # an overflowed covariance (inf, or inf - inf = NaN) made LAPACK raise "Eigenvalues did not converge"
+    from pursuit._linalg import inv_spd
+
+    for m in (2, 3, 4):
+        good = np.eye(m) * 2.0
+        S = np.stack([good, np.full((m, m), np.inf), good])
+        S[1][np.triu_indices(m, 1)] = np.nan
+        with np.errstate(invalid="ignore", over="ignore"):
+            out = inv_spd(S)
+        assert np.isnan(out[1]).all()
+        np.testing.assert_allclose(out[0], np.eye(m) / 2.0)
+        np.testing.assert_allclose(out[2], np.eye(m) / 2.0)

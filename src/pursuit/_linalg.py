@@ -117,8 +117,22 @@ def inv_spd(S: np.ndarray) -> np.ndarray:
     bad = np.linalg.slogdet(flat)[0] == 0  # the zero pivot LAPACK's inverse refused
     out = np.empty(flat.shape, dtype=float)
     out[~bad] = np.linalg.inv(flat[~bad])
-    out[bad] = np.linalg.pinv(symmetrize(flat[bad]), hermitian=True)
+    out[bad] = _pinv_finite(flat[bad])
     return out.reshape(S.shape)
+
+
+def _pinv_finite(S: np.ndarray) -> np.ndarray:
+    """Pseudo-inverse of symmetric matrices; NaN for one with a non-finite entry.
+
+    An overflowed covariance (inf, or inf − inf = NaN) has no inverse, and
+    LAPACK's eigensolver raises on it ("Eigenvalues did not converge"): its
+    run gets NaN instead, a non-finite estimate that the divergence test flags.
+    """
+    out = np.full(S.shape, np.nan)
+    finite = np.isfinite(S).all(axis=(-2, -1))
+    if finite.any():
+        out[finite] = np.linalg.pinv(symmetrize(S[finite]), hermitian=True)
+    return out
 
 
 # The cofactor determinant of an SPD matrix has a relative error of about
@@ -136,7 +150,7 @@ def _fix_lost_precision(S: np.ndarray, det: np.ndarray, out: np.ndarray) -> np.n
     """Re-invert, by eigendecomposition, the matrices whose closed form lost precision."""
     bad = _imprecise(S, det)
     if np.any(bad):
-        out[bad] = np.linalg.pinv(symmetrize(S[bad]), hermitian=True)
+        out[bad] = _pinv_finite(S[bad])
     return out
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from .. import registry
-from ..filters.fading import Constant
+from ..filters.fading import MAX_CONSTANT_FADING, Constant
 from ..filters.gaussian import (
     CubatureKalmanFilter,
     ExtendedKalmanFilter,
@@ -20,7 +20,24 @@ from ..registry import Param, params_from, register
 
 
 def build_fading(field: str, value: Any):
-    """A fading strategy from a number (constant λ) or a table ``{type = ..., ...}``."""
+    """A fading strategy from a number (constant λ) or a table ``{type = ..., ...}``.
+
+    A constant λ above :data:`~pursuit.filters.fading.MAX_CONSTANT_FADING` (2¹³) is refused,
+    as in model files: it compounds at every step and breaks float64's updates.
+    """
+    strategy = _build_fading(field, value)
+    lam = getattr(strategy, "lam", None)
+    if isinstance(strategy, Constant) and lam > MAX_CONSTANT_FADING:
+        where = field if isinstance(value, (int, float)) else f"{field}.lam"
+        raise ValueError(
+            f"{where}: {lam:g} is beyond 2^13 ≈ {MAX_CONSTANT_FADING:.3g}: a constant fading factor multiplies the "
+            "covariance at every step, and beyond that the updates lose positive definiteness in float64 (measured: "
+            "1e4 is exact, 1e6 is not)"
+        )
+    return strategy
+
+
+def _build_fading(field: str, value: Any):
     if isinstance(value, bool):
         raise ValueError(f"{field}: expected a number or a table, got a boolean")
     if isinstance(value, (int, float)):

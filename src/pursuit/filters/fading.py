@@ -36,7 +36,7 @@ import numpy as np
 from .._validation import in_range
 from .jacobians import measurement_jacobian
 
-__all__ = ["Fade", "FadingContext", "FadingStrategy", "Constant", "NoFading", "CONDITION_LIMIT"]
+__all__ = ["Fade", "FadingContext", "FadingStrategy", "Constant", "MAX_CONSTANT_FADING", "NoFading", "CONDITION_LIMIT"]
 
 CONDITION_LIMIT = 1.0 / np.sqrt(np.finfo(float).eps)
 """κ ≈ 6.7e7: the adaptive strategies keep λ·tr(H P̄ Hᵀ) ≤ κ·tr(R) (see :attr:`FadingContext.lam_ceiling`)."""
@@ -181,6 +181,14 @@ class FadingStrategy(Protocol):
     def init(self, batch: tuple[int, ...]) -> Any: ...
 
     def factor(self, memory: Any, ctx: FadingContext) -> tuple[Fade, Any]: ...
+
+
+MAX_CONSTANT_FADING = 2.0**13
+"""The largest constant fading factor the model and experiment files accept (2¹³ ≈ 8.2e3).
+
+A constant λ multiplies the covariance at every step and compounds; measured (WSNRange, EKF):
+λ = 1e4 exact, 1e6 broken. Measured, not derived; the library itself accepts any λ ≥ 1.
+"""
 
 
 @dataclass(frozen=True)

@@ -40,6 +40,7 @@ import numpy as np
 from .. import registry
 from .._validation import MAX_MEASUREMENT
 from ..experiment import ConfigError, config_error, read_toml
+from ..filters.fading import MAX_CONSTANT_FADING
 from ..filters.gaussian import check_prior_against_noise
 from ..gaussian import Gaussian
 from ..models.measurement import LinearGaussian, RangeSensors, TimeOfArrival
@@ -197,7 +198,6 @@ def _sigma(field: str, v: Any) -> np.ndarray:
 # --------------------------------------------------------------------------
 _SQUARABLE = MAX_MEASUREMENT  # 2^500: its square 2^1000 leaves a factor 2^24 below float64's overflow at 2^1024
 _MIN_SIGMA = 2.0**-537  # its square 2^-1074 is the smallest positive float64; below, R = σ² is 0
-_MAX_FADING = 2.0**13
 
 
 def _sigma_squarable(field: str, sigma: np.ndarray) -> None:
@@ -301,9 +301,9 @@ def _check_fading(filt: Any) -> None:
     for f in getattr(filt, "filters", ()):  # an IMM's modes each take the [filter] table's fading
         _check_fading(f)
     lam = getattr(getattr(filt, "fading", None), "lam", None)
-    if isinstance(lam, float) and lam > _MAX_FADING:
+    if isinstance(lam, float) and lam > MAX_CONSTANT_FADING:
         raise ValueError(
-            f"filter.fading: {lam:g} is beyond 2^13 ≈ {_MAX_FADING:.3g}: a constant fading factor multiplies the covariance "
+            f"filter.fading: {lam:g} is beyond 2^13 ≈ {MAX_CONSTANT_FADING:.3g}: a constant fading factor multiplies the covariance "
             "at every step, and beyond that the updates lose positive definiteness in float64 (measured: 1e4 is exact, 1e6 is not)"
         )
 

@@ -55,7 +55,8 @@ def gospa_over_time(summaries: Mapping[str, Mapping[str, Any]], times: np.ndarra
         ax.xaxis.set_major_locator(MaxNLocator(4))
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
-    parts[0].set_ylabel(f"part (distance^{p:g})")
+    for ax in parts:
+        ax.set_ylabel(f"distance^{p:g}")
     return fig
 
 
@@ -144,8 +145,8 @@ def scene(
     if view is not None:
         axes[0].set_xlim(view[0][0], view[1][0])
         axes[0].set_ylim(view[0][1], view[1][1])
-    for row in grid:
-        row[0].set_ylabel("y (m)")
+    for ax in axes:
+        ax.set_ylabel("y (m)")
     legend_beside(axes[min(cols, len(names)) - 1])
     fig.suptitle(f"{title_prefix + ': ' if title_prefix else ''}run {run}, truth, detections and labelled tracks", fontsize=11)
     return fig
