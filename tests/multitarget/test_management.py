@@ -192,3 +192,20 @@ def test_track_method_is_track_scans():
     a = tracker.track(scans.z, times=scans.times)
     b = track_scans(tracker, scans.z, times=scans.times)
     assert np.array_equal(a.mean, b.mean, equal_nan=True) and np.array_equal(a.label, b.label)
+
+
+def test_checked_scans_names_the_argument():
+    from types import SimpleNamespace
+
+    from pursuit.multitarget.tracking import checked_scans
+
+    filt = SimpleNamespace(motion=SimpleNamespace(dt=None))
+    z = np.zeros((3, 1, 2, 2))
+    with pytest.raises(ValueError, match="times: the first scan is one motion-model dt after the start"):
+        checked_scans(z, [1.0, 2.0, 3.0], filt)
+    assert checked_scans(z, None, filt)[1] is None  # untimed scans need no dt
+    with pytest.raises(ValueError, match="times: expected 3 increasing scan times"):
+        checked_scans(z, [1.0, 1.0, 2.0], SimpleNamespace(motion=SimpleNamespace(dt=1.0)))
+    z[0, 0, 0, 0] = np.inf
+    with pytest.raises(ValueError, match="z: detections must be finite or NaN"):
+        checked_scans(z, None, filt)

@@ -79,6 +79,27 @@ _H_AXIS = np.array([[1.0, 0.0, 0.0]])
 _H_AXIS.setflags(write=False)
 
 
+def check_adaptation_params(f: Any) -> None:
+    """Check (and store converted) the APCS adaptation parameters of ``f``, a frozen dataclass.
+
+    ``c_a``, ``sigma_a``, ``sigma_min``, ``sigma_max``, ``rho``, ``beta_s``, ``alpha_cap`` (at least
+    ``alpha0``): shared by :class:`AdaptiveCSFilter` and the joint
+    :class:`~pursuit.filters.cs_nonlinear.NonlinearCSFilter`; raises ``ValueError`` naming the field.
+    """
+    object.__setattr__(f, "c_a", positive("c_a", f.c_a))
+    object.__setattr__(f, "sigma_a", nonnegative("sigma_a", f.sigma_a))
+    object.__setattr__(f, "sigma_min", nonnegative("sigma_min", f.sigma_min))
+    if f.sigma_max is not None:
+        object.__setattr__(f, "sigma_max", positive("sigma_max", f.sigma_max))
+        if f.sigma_max < f.sigma_min:
+            raise ValueError(f"sigma_max: must be at least sigma_min = {f.sigma_min}, got {f.sigma_max}")
+    object.__setattr__(f, "rho", in_range("rho", f.rho, 0.0, 1.0))
+    object.__setattr__(f, "beta_s", in_range("beta_s", f.beta_s, 1.0, np.inf, high_open=True))
+    object.__setattr__(f, "alpha_cap", positive("alpha_cap", f.alpha_cap))
+    if f.alpha_cap < f.alpha0:
+        raise ValueError(f"alpha_cap: must be at least alpha0 = {f.alpha0}, got {f.alpha_cap}")
+
+
 def chi2_threshold(p: float, dof: int = 1) -> float:
     """The χ² threshold M with P{D > M} = p for D ~ χ²(dof) (p = 0.1, 1 dof: 2.706)."""
     in_range("false_alarm", p, 0.0, 1.0, low_open=True, high_open=True)
@@ -496,18 +517,7 @@ class AdaptiveCSFilter(_AxisFilter):
         for name, allowed in (("variance", _VARIANCE_LAWS), ("fading", _FADING_RULES), ("alpha_rule", _ALPHA_RULES)):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"{name}: must be one of {', '.join(map(repr, allowed))}, got {getattr(self, name)!r}")
-        object.__setattr__(self, "c_a", positive("c_a", self.c_a))
-        object.__setattr__(self, "sigma_a", nonnegative("sigma_a", self.sigma_a))
-        object.__setattr__(self, "sigma_min", nonnegative("sigma_min", self.sigma_min))
-        if self.sigma_max is not None:
-            object.__setattr__(self, "sigma_max", positive("sigma_max", self.sigma_max))
-            if self.sigma_max < self.sigma_min:
-                raise ValueError(f"sigma_max: must be at least sigma_min = {self.sigma_min}, got {self.sigma_max}")
-        object.__setattr__(self, "rho", in_range("rho", self.rho, 0.0, 1.0))
-        object.__setattr__(self, "beta_s", in_range("beta_s", self.beta_s, 1.0, np.inf, high_open=True))
-        object.__setattr__(self, "alpha_cap", positive("alpha_cap", self.alpha_cap))
-        if self.alpha_cap < self.alpha0:
-            raise ValueError(f"alpha_cap: must be at least alpha0 = {self.alpha0}, got {self.alpha_cap}")
+        check_adaptation_params(self)
         _check_mean(self.mean)
 
     def _default_name(self) -> str:

@@ -60,7 +60,7 @@ from ..gaussian import Gaussian
 from ..models.maneuver import CS_VARIANCE_FACTOR, CurrentStatistical, cs_variance
 from ..rng import RNGLike
 from .base import FilterBase, as_gaussian, prior_batch
-from .cs import AxisState, _matrices, _matrices_for, chi2_threshold
+from .cs import AxisState, _matrices, _matrices_for, check_adaptation_params, chi2_threshold
 from .gating import apply_gate
 from .gaussian import ExtendedKalmanFilter, UnscentedKalmanFilter, _update
 from .jacobians import measurement_jacobian
@@ -186,18 +186,7 @@ class NonlinearCSFilter(FilterBase):
         if cap < self.a_max:
             raise ValueError(f"a_max_cap: must be at least a_max = {self.a_max}, got {cap}")
         object.__setattr__(self, "a_max_cap", float(cap))
-        object.__setattr__(self, "c_a", positive("c_a", self.c_a))
-        object.__setattr__(self, "sigma_a", nonnegative("sigma_a", self.sigma_a))
-        object.__setattr__(self, "sigma_min", nonnegative("sigma_min", self.sigma_min))
-        if self.sigma_max is not None:
-            object.__setattr__(self, "sigma_max", positive("sigma_max", self.sigma_max))
-            if self.sigma_max < self.sigma_min:
-                raise ValueError(f"sigma_max: must be at least sigma_min = {self.sigma_min}, got {self.sigma_max}")
-        object.__setattr__(self, "rho", in_range("rho", self.rho, 0.0, 1.0))
-        object.__setattr__(self, "beta_s", in_range("beta_s", self.beta_s, 1.0, np.inf, high_open=True))
-        object.__setattr__(self, "alpha_cap", positive("alpha_cap", self.alpha_cap))
-        if self.alpha_cap < self.alpha0:
-            raise ValueError(f"alpha_cap: must be at least alpha0 = {self.alpha0}, got {self.alpha_cap}")
+        check_adaptation_params(self)
         if self.gate is not None:
             object.__setattr__(self, "gate", in_range("gate", self.gate, 0.0, 1.0, low_open=True, high_open=True))
         super().__post_init__()  # model checks: h and cov exist

@@ -183,5 +183,15 @@ def _build_tracker(table: Any, view: _ScenarioView) -> Any:
     kind = values.pop("type", None)
     if kind is None:
         raise ValueError("tracker.type: required (gnn or jpda; see `pursuit list trackers`)")
+    if kind not in STREAMING_TRACKERS:
+        # PMHT, EPMHT and GM-PHD have no per-scan step for --stream yet (and GM-PHD no track table)
+        raise ValueError(
+            f"tracker.type: `pursuit track --multi` runs {' or '.join(STREAMING_TRACKERS)}, got {kind!r} "
+            "(the other trackers run in Python and in experiment files)"
+        )
     comp = registry.get("tracker", kind, "tracker.type")
     return comp.build(scenario=view, where="tracker", **comp.resolve(values, "tracker"))
+
+
+STREAMING_TRACKERS = ("gnn", "jpda")
+"""The trackers `pursuit track --multi` can run, batch and streaming (a per-scan step through track_stream)."""

@@ -62,18 +62,22 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .._validation import as_float_array, in_range, positive, positive_int
+from .._validation import in_range, positive, positive_int
 from ..filters.gaussian import CubatureKalmanFilter, ExtendedKalmanFilter, UnscentedKalmanFilter
 from ..gaussian import Gaussian
 from ..initiation import VELOCITY_SIGMA, one_point, two_point
 from ..rng import RNGLike
 from .association import evaluate_hypotheses
 from .management import detection_positions
-from .tracking import MultiTrackResult, _layout_measurement, _layout_motion
+from .tracking import MultiTrackResult, _layout_measurement, _layout_motion, checked_scans
 
 __all__ = ["GMPHDTracker", "GMPHDResult", "prune_merge", "extract_estimates", "BIRTH_MODES"]
 
 BIRTH_MODES = ("two-point", "one-point")
+
+# evaluate_hypotheses gates for GNN and JPDA; GM-PHD weighs every (component, detection) pair and
+# never reads the gate's verdict, so the value passed is immaterial
+_UNUSED_GATE = 0.99
 """The adaptive birth models (``birth=`` a string); a Gaussian gives fixed births, None none."""
 
 _GAUSSIAN_FILTERS = (ExtendedKalmanFilter, UnscentedKalmanFilter, CubatureKalmanFilter)
@@ -232,21 +236,10 @@ class GMPHDTracker:
         GMPHDResult
             The extracted estimates (every one ``confirmed``) with their labels.
         """
-        z = np.asarray(z, dtype=float)
-        if z.ndim != 4:
-            raise ValueError(f"z: expected detections of shape (K, M, D, m), got {z.shape}")
-        if np.isinf(z).any():
-            raise ValueError("z: detections must be finite or NaN (padding)")
-        nan = np.isnan(z)
-        if (nan.any(axis=-1) != nan.all(axis=-1)).any():
-            raise ValueError("z: a detection row must be all finite or all NaN (padding)")
+        z, times = checked_scans(z, times, self.filter)
         K, M, D, m = z.shape
         filt = self.filter
         motion = _layout_motion(filt)
-        if times is not None:
-            times = as_float_array("times", times)
-            if times.shape != (K,) or np.any(np.diff(times) <= 0):
-                raise ValueError(f"times: expected {K} increasing scan times, got shape {times.shape}")
         model_dt = getattr(motion, "dt", None)
         if isinstance(self.birth, str) and self.birth == "two-point" and times is None and model_dt is None:
             raise ValueError("times: two-point births need scan times when the motion model has no dt")
@@ -313,7 +306,7 @@ class GMPHDTracker:
         if C == 0:  # nothing to update (no component yet)
             return w, mean, cov, label, np.zeros((M, D)), np.zeros(M)
         state = filt.init(Gaussian(mean, cov), batch=(M, C), rng=rng)
-        hyp = evaluate_hypotheses(filt, state, z, alive, 0.99, k, dt)
+        hyp = evaluate_hypotheses(filt, state, z, alive, _UNUSED_GATE, k, dt)
         paired = hyp.pair >= 0  # (M, C, D): an alive component and a real detection
         with np.errstate(divide="ignore"):
             log_num = np.where(paired, np.log(self.p_detect) + np.log(w)[..., None] + hyp.loglik, -np.inf)

@@ -42,12 +42,12 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_float_array, in_range, positive, positive_int
+from .._validation import in_range, positive, positive_int
 from ..filters.jacobians import measurement_jacobian
 from ..gaussian import Gaussian
 from ..rng import RNGLike
 from .management import initiate, new_table, update_counts
-from .tracking import MultiTrackResult, TrackerBase, _as_initial, _layout_motion
+from .tracking import MultiTrackResult, TrackerBase, _as_initial, _layout_motion, checked_scans
 
 __all__ = ["PMHTTracker", "PMHTResult", "WindowFit", "LinearModel", "Maneuver", "em_window", "linear_model"]
 
@@ -519,22 +519,11 @@ class PMHTTracker(TrackerBase):
         ``initial``: tracks known before the first scan (Gaussian with mean
         ``(L0, n)`` or ``(M, L0, n)``), confirmed, in slots 0..L0−1.
         """
-        z = np.asarray(z, dtype=float)
-        if z.ndim != 4:
-            raise ValueError(f"z: expected detections of shape (K, M, D, m), got {z.shape}")
-        if np.isinf(z).any():
-            raise ValueError("z: detections must be finite or NaN (padding)")
-        nan = np.isnan(z)
-        if (nan.any(axis=-1) != nan.all(axis=-1)).any():
-            raise ValueError("z: a detection row must be all finite or all NaN (padding)")
+        z, times = checked_scans(z, times, self.filter)
         K, M, D, m = z.shape
         L, B = self.capacity, self.batch
         filt = self.filter
         motion = _layout_motion(filt)
-        if times is not None:
-            times = as_float_array("times", times)
-            if times.shape != (K,) or np.any(np.diff(times) <= 0):
-                raise ValueError(f"times: expected {K} increasing scan times, got shape {times.shape}")
         model_dt = getattr(motion, "dt", None)
         if self.max_speed is not None and times is None and model_dt is None:
             raise ValueError("times: initiation needs scan times when the motion model has no dt")

@@ -34,7 +34,7 @@ from ..rng import RNGLike
 from .association import Hypotheses, evaluate_hypotheses, log_weights
 from .management import TrackTable, detection_positions, initiate, new_table, update_counts
 
-__all__ = ["TrackerBase", "MultiTrackResult", "ScanTracks", "track_scans", "track_stream"]
+__all__ = ["TrackerBase", "MultiTrackResult", "ScanTracks", "track_scans", "track_stream", "checked_scans"]
 
 # what the hypothesis evaluation and the JPDA moment matching need: a Gaussian state (mean, cov) per track
 _PER_TRACK_FILTERS = (ExtendedKalmanFilter, UnscentedKalmanFilter, CubatureKalmanFilter, InteractingMultipleModel)
@@ -253,16 +253,9 @@ def track_scans(
     --------
     track_stream : the same tracks one scan at a time, in constant memory.
     """
-    z = np.asarray(z, dtype=float)
-    if z.ndim != 4:
-        raise ValueError(f"z: expected detections of shape (K, M, D, m), got {z.shape}")
-    _check_rows("z", z)
+    z, times = checked_scans(z, times, tracker.filter)
     K, M, D, m = z.shape
     L = tracker.capacity
-    if times is not None:
-        times = as_float_array("times", times)
-        if times.shape != (K,) or np.any(np.diff(times) <= 0):
-            raise ValueError(f"times: expected {K} increasing scan times, got shape {times.shape}")
     _check_timing(tracker, timed=times is not None)
     table, parking = _start(tracker, M, initial, rng)
     n = parking.mean.shape[-1]
@@ -371,6 +364,28 @@ def _stream(tracker: TrackerBase, scans: Iterable[tuple[float | None, Any]], ini
             yield t, z
 
     yield from _steps(tracker, table, parking, checked(), rng)
+
+
+def checked_scans(z: Any, times: Any, filt: Any) -> tuple[np.ndarray, np.ndarray | None]:
+    """The checks every multi-target tracker makes of its input: ``z (K, M, D, m)`` and ``times (K,)``.
+
+    Rows all finite or all NaN (padding), no infinity; times increasing; a
+    motion model with a ``dt`` when the scans are timed (the first scan is one
+    model ``dt`` after the start).  Returns ``z`` and ``times`` as float arrays;
+    raises ``ValueError`` naming the argument.
+    """
+    z = np.asarray(z, dtype=float)
+    if z.ndim != 4:
+        raise ValueError(f"z: expected detections of shape (K, M, D, m), got {z.shape}")
+    _check_rows("z", z)
+    K = z.shape[0]
+    if times is not None:
+        times = as_float_array("times", times)
+        if times.shape != (K,) or np.any(np.diff(times) <= 0):
+            raise ValueError(f"times: expected {K} increasing scan times, got shape {times.shape}")
+        if getattr(_layout_motion(filt), "dt", None) is None:
+            raise ValueError("times: the first scan is one motion-model dt after the start, and this motion model has no dt")
+    return z, times
 
 
 def _check_rows(name: str, z: np.ndarray) -> None:
