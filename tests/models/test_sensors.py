@@ -149,6 +149,10 @@ def test_observer_angles_need_a_step_on_the_track():
         ObserverBearings(np.zeros((3, 3)), [0.1, 0.1, 0.1])
     with pytest.raises(ValueError, match="^position_indices:"):
         ObserverBearings(np.zeros((3, 3)), 0.1, position_indices=(0, 3))
+    with pytest.raises(ValueError, match="position_indices: expected distinct non-negative"):
+        ObserverBearings(np.zeros((3, 3)), 0.1, position_indices=(0, 0, 6))
+    with pytest.raises(ValueError, match="position_indices: expected distinct non-negative"):
+        ObserverBearings(np.zeros((3, 2)), 0.1, position_indices=(-1, 3))
 
 
 def test_an_ekf_with_observer_angles_and_numba_warns_and_computes_with_numpy():

@@ -148,6 +148,8 @@ class ObserverBearings(_GaussianNoise):
         idx = tuple(3 * i for i in range(d)) if self.position_indices is None else tuple(int(i) for i in self.position_indices)
         if len(idx) != d:
             raise ValueError(f"position_indices: expected {d} indices for a {d}-D observer, got {len(idx)}")
+        if any(i < 0 for i in idx) or len(set(idx)) != len(idx):
+            raise ValueError(f"position_indices: expected distinct non-negative state indices, got {list(idx)}")
         m = d - 1
         sig = as_vector("sigma", self.sigma)
         if sig.shape[0] not in (1, m):
