@@ -155,4 +155,4 @@ class EPMHTTracker(PMHTTracker):
         p0 = np.full(J, 1.0 / J) if self.mode_prior is None else np.asarray(self.mode_prior, dtype=float)
         axes = self._axes()
         prior = np.broadcast_to(p0, (runs, capacity, axes.shape[0], J)).copy()
-        return Maneuver(np.asarray(self.levels, dtype=float), Pi, prior, axes)
+        return Maneuver(np.asarray(self.levels, dtype=float), Pi, prior, axes, mode_posteriors)

@@ -38,7 +38,7 @@ others iterate, so a run's result does not depend on the other runs.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -167,14 +167,17 @@ class Maneuver:
     """EPMHT's maneuver input chain (docs/spec/05-multi-target-pmht.md §3).
 
     Levels ``(J,)``, Π ``(J, J)``, the level probabilities ``(M, L, A, J)`` at
-    each slot's prior scan, and per axis the (position, velocity) state
-    indices ``(A, 2)``.
+    each slot's prior scan, per axis the (position, velocity) state indices
+    ``(A, 2)``, and ``posteriors``, the E-step's forward–backward pass
+    (:func:`pursuit.multitarget.epmht.mode_posteriors`: EPMHT hands it in,
+    so this module does not import the one that builds on it).
     """
 
     levels: np.ndarray
     transition: np.ndarray
     prior: np.ndarray
     axes: np.ndarray
+    posteriors: Callable[..., tuple[np.ndarray, np.ndarray]]
 
 
 def em_window(
@@ -274,11 +277,9 @@ def em_window(
         r = np.nonzero(~done)[0]
         pm, pc, fr, ar = prior_mean[r], prior_cov[r], first[r], active[r]
         if maneuvers:
-            from .epmht import mode_posteriors  # EPMHT builds on this module
-
             Xr = X[r]
             prev = None if smoothed is None else tuple(a[r] for a in smoothed)
-            g, a = mode_posteriors(model, replace(maneuver, prior=maneuver.prior[r]), Xr, prev, pm, pc, fr, ar)
+            g, a = maneuver.posteriors(model, replace(maneuver, prior=maneuver.prior[r]), Xr, prev, pm, pc, fr, ar)
             if gamma is None:
                 gamma, alpha = g, a
             else:
