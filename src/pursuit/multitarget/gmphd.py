@@ -68,8 +68,7 @@ from ..gaussian import Gaussian
 from ..initiation import VELOCITY_SIGMA, one_point, two_point
 from ..rng import RNGLike
 from .association import evaluate_hypotheses
-from .management import detection_positions
-from .tracking import MultiTrackResult, _layout_measurement, _layout_motion, checked_scans
+from .tracking import MultiTrackResult, _layout_motion, checked_scans, resolve_position
 
 __all__ = ["GMPHDTracker", "GMPHDResult", "prune_merge", "extract_estimates", "BIRTH_MODES"]
 
@@ -187,16 +186,7 @@ class GMPHDTracker:
                 raise ValueError("birth: adaptive births need a motion model with position_indices")
             if self.birth == "two-point" and self.max_speed is None:
                 raise ValueError("max_speed: two-point births pair detections within max_speed · dt; give it")
-            if self.position is None:
-                to_position = detection_positions(_layout_measurement(self.filter), motion)
-                if to_position is None:
-                    raise ValueError(
-                        "position: give a function from a detection to a position and covariance; the measurement "
-                        "model is neither a position fix of the motion model's positions nor a range-bearing sensor"
-                    )
-                object.__setattr__(self, "position", to_position)
-            elif not callable(self.position):
-                raise ValueError("position: expected a function z -> (position, covariance)")
+            object.__setattr__(self, "position", resolve_position(self.position, self.filter, motion))
         elif self.birth is not None:
             try:
                 g = self.birth if isinstance(self.birth, Gaussian) else Gaussian(*self.birth)

@@ -40,6 +40,26 @@ __all__ = ["TrackerBase", "MultiTrackResult", "ScanTracks", "track_scans", "trac
 _PER_TRACK_FILTERS = (ExtendedKalmanFilter, UnscentedKalmanFilter, CubatureKalmanFilter, InteractingMultipleModel)
 
 
+def resolve_position(position: Any, filt: Any, motion: Any) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """The detection → (position, covariance) function that track initiation uses.
+
+    ``position`` when given (it must be callable), else the built-in one for the
+    filter's sensor (:func:`pursuit.multitarget.management.detection_positions`);
+    raises ``ValueError`` naming ``position`` when there is neither.
+    """
+    if position is not None:
+        if not callable(position):
+            raise ValueError("position: expected a function z -> (position, covariance)")
+        return position
+    to_position = detection_positions(_layout_measurement(filt), motion)
+    if to_position is None:
+        raise ValueError(
+            "position: give a function from a detection to a position and covariance; the measurement "
+            "model is neither a position fix of the motion model's positions nor a range-bearing sensor"
+        )
+    return to_position
+
+
 def _layout_motion(filt: Any) -> Any:
     """The motion model whose state the tracks carry: the filter's, or an IMM's first mode without maps."""
     motion = getattr(filt, "motion", None)
@@ -128,16 +148,7 @@ class TrackerBase:
             motion = _layout_motion(self.filter)
             if motion is None or not hasattr(motion, "position_indices"):
                 raise ValueError("filter: initiation (max_speed) needs a motion model with position_indices")
-            if self.position is None:
-                to_position = detection_positions(_layout_measurement(self.filter), motion)
-                if to_position is None:
-                    raise ValueError(
-                        "position: give a function from a detection to a position and covariance; the measurement "
-                        "model is neither a position fix of the motion model's positions nor a range-bearing sensor"
-                    )
-                object.__setattr__(self, "position", to_position)
-            elif not callable(self.position):
-                raise ValueError("position: expected a function z -> (position, covariance)")
+            object.__setattr__(self, "position", resolve_position(self.position, self.filter, motion))
         if not self.name:
             object.__setattr__(self, "name", f"{type(self).__name__.removesuffix('Tracker')}-{getattr(self.filter, 'name', '')}")
 
