@@ -209,6 +209,32 @@ def test_interrupt_stops_the_workers_without_waiting_for_their_chunks(tmp_path):
     assert backend._pool is None
 
 
+def test_a_signal_while_a_worker_starts_stops_that_worker_too(monkeypatch):
+    """A signal between a worker's start and its entry in the pool's table (a flaky CLI test caught it):
+    the unlisted worker is stopped too, else exiting would join it for ever (multiprocessing's atexit)."""
+    import multiprocessing
+    import time
+    from concurrent.futures.process import ProcessPoolExecutor
+
+    before = {p.pid for p in multiprocessing.active_children()}
+    spawn = ProcessPoolExecutor._spawn_process
+
+    def spawn_then_signal(pool):
+        if not pool._processes:
+            return spawn(pool)
+        proc = pool._mp_context.Process(target=time.sleep, args=(60,))
+        proc.start()  # started, then "the signal": never entered in pool._processes
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ProcessPoolExecutor, "_spawn_process", spawn_then_signal)
+    started = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        with LocalProcesses(2) as backend:
+            backend.map_chunks(_worker_thread_env, [(0, 1), (1, 2)], lambda span, result: None)
+    assert time.monotonic() - started < 30
+    assert {p.pid for p in multiprocessing.active_children()} - before == set()
+
+
 def test_workers_that_keep_dying_end_in_worker_lost(tmp_path):
     with LocalProcesses(2, max_restarts=1) as backend, warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

@@ -208,9 +208,13 @@ class LocalProcesses:
         self.max_restarts = int(max_restarts)
         self.restarts = 0
         self._pool: ProcessPoolExecutor | None = None
+        self._children_before: set[int] = set()
 
     def _executor(self) -> ProcessPoolExecutor:
         if self._pool is None:
+            # Remembered so that terminate() also finds a worker whose start a signal interrupted: it is
+            # this process's child but not yet in the pool's table, and exiting would wait for it.
+            self._children_before = {p.pid for p in multiprocessing.active_children()}
             self._pool = ProcessPoolExecutor(
                 max_workers=self.workers, mp_context=_mp_context(), initializer=_worker_init
             )
@@ -231,6 +235,10 @@ class LocalProcesses:
         if pool is None:
             return
         procs = list((getattr(pool, "_processes", None) or {}).values())  # no public handle before Python 3.14
+        known = {p.pid for p in procs}
+        procs += [
+            p for p in multiprocessing.active_children() if p.pid not in known and p.pid not in self._children_before
+        ]
         for proc in procs:
             proc.terminate()
         for proc in procs:
@@ -251,11 +259,13 @@ class LocalProcesses:
                 on_result(span, fut.result())
 
         while todo:
-            pool = self._executor()
-            with _one_thread_per_worker():  # processes (and the forkserver) start inside submit
-                futures: dict[Future, Span] = {pool.submit(task, *span): span for span in todo}
+            futures: dict[Future, Span] = {}
             broken = False
             try:
+                pool = self._executor()
+                # Inside the try: a signal while the workers start must stop the ones already started.
+                with _one_thread_per_worker():  # processes (and the forkserver) start inside submit
+                    futures.update((pool.submit(task, *span), span) for span in todo)
                 pending = set(futures)
                 while pending and not broken:
                     done, pending = wait(pending, return_when=FIRST_COMPLETED)
