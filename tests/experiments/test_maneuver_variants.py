@@ -10,7 +10,7 @@ import pytest
 
 from pursuit.cli import main
 from pursuit.experiment import ConfigError, load_experiment
-from pursuit.experiments.maneuver import _log_ratio_interval
+from pursuit.experiments.maneuver import log_ratio_interval
 
 
 def test_p4_bearings_reproduces_with_a_verdict_per_claim(tmp_path, capsys):
@@ -33,12 +33,12 @@ def test_p4_bearings_reproduces_with_a_verdict_per_claim(tmp_path, capsys):
     assert names == {"CS-EKF", "CS-EKF-2", "ACS-EKF", "ACS-UKF", "IMM-Singer"}
 
 
-def test_paired_log_ratio_interval_against_a_hand_computation():
+def test_pairedlog_ratio_interval_against_a_hand_computation():
     rb = np.array([2.0, 4.0, 3.0, 5.0])
     rf = np.array([1.0, 2.0, 2.0, 2.0])
     d = np.log(rf / rb)
     half = 3.182446305284263 * d.std(ddof=1) / 2.0  # t_{0.975, 3}
-    m, lo, hi = _log_ratio_interval(rb, rf)
+    m, lo, hi = log_ratio_interval(rb, rf)
     assert m == pytest.approx(d.mean()) and lo == pytest.approx(d.mean() - half) and hi == pytest.approx(d.mean() + half)
 
 
