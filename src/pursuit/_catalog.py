@@ -29,6 +29,7 @@ CATALOG: dict[str, list[tuple[str, str]]] = {
         ('ekf', 'Extended Kalman filter (Joseph form; numerical Jacobians if the model has none)'),
         ('ics-pf', 'Improved cuckoo-search particle filter (Wei & Guo, "WSN target tracking based on improved cuckoo particle filter algorithm"): shrinking step size and Pa, fitness-trend step; Metropolis-Hastings moves (acceptance = "greedy": the paper-literal search)'),
         ('imm', 'IMM over any filters built for the scenario (each [[...models]] entry is a filter table)'),
+        ('imm-cv', "IMM over modes on the scenario's constant-velocity state: CV with its own q, or a constant turn at rate omega (rad/s)"),
         ('imm-singer', 'IMM over Singer-model Kalman filters (EKFs for bearings) with different (alpha, sigma) (Tan et al.)'),
         ('kf', 'Linear Kalman filter (Joseph form)'),
         ('ms', 'Modified Singer filter: alpha and sigma estimated online from the acceleration autocorrelation'),

@@ -33,7 +33,7 @@ def test_p4_bearings_reproduces_with_a_verdict_per_claim(tmp_path, capsys):
     assert names == {"CS-EKF", "CS-EKF-2", "ACS-EKF", "ACS-UKF", "IMM-Singer"}
 
 
-def test_pairedlog_ratio_interval_against_a_hand_computation():
+def test_paired_log_ratio_interval_against_a_hand_computation():
     rb = np.array([2.0, 4.0, 3.0, 5.0])
     rf = np.array([1.0, 2.0, 2.0, 2.0])
     d = np.log(rf / rb)
