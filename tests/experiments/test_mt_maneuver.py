@@ -99,7 +99,7 @@ def test_imm_cv_needs_a_constant_velocity_scenario():
 
 
 def test_pmht_refuses_an_imm_naming_the_filter():
-    # the multiple-model PMHT is not built: PMHT's smoother needs one linear motion model
+    # PMHT's smoother needs one linear motion model (its multiple-model form is mmpmht, over noise levels)
     sc = _scenario("mt-maneuvering")
     with pytest.raises(ValueError, match=r"trackers\[0\]\.filter: PMHTTracker needs a linear motion model"):
         registry.get("tracker", "pmht").build(
@@ -209,11 +209,32 @@ def test_claims_table_comes_first_and_judges_the_experiments_numbers(tmp_path):
 def test_mt_maneuver_loads_and_runs_tiny():
     exp = load_experiment(ROOT / "experiments" / "mt-maneuver.toml")
     names = [t.name for t in exp.plan.trackers]
-    assert names == ["GNN-EKF", "JPDA-EKF", "GNN-IMM", "JPDA-IMM", "PMHT", "EPMHT"]
+    assert names == ["GNN-EKF", "JPDA-EKF", "GNN-IMM", "JPDA-IMM", "PMHT", "EPMHT", "MM-PMHT"]
     assert isinstance(exp.plan.trackers[3].filter, InteractingMultipleModel)
     out = exp.plan.run(runs=2, seed=1)
     claims = out.tables[0]
-    assert claims.name == "claims" and len(claims.rows) == 3
-    assert {r[3] for r in claims.rows} == {"EPMHT", "JPDA-IMM"}
+    assert claims.name == "claims" and len(claims.rows) == 4
+    assert {r[3] for r in claims.rows} == {"EPMHT", "JPDA-IMM", "MM-PMHT"}
     assert all(r[-1] in ("holds", "reversed", "not significant") for r in claims.rows)
     assert set(out.figures) == {"gospa", "scene"}
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (("noise_scales = [1.0, 50.0]", "noise_scales = [1.0, -50.0]"), "trackers[1].noise_scales: expected a non-empty sequence of positive numbers"),
+        (("noise_scales = [1.0, 50.0]", "noise_scales = []"), "trackers[1].noise_scales"),
+        (("noise_scales = [1.0, 50.0]", 'noise_scales = "high"'), "trackers[1].noise_scales: expected a list of numbers"),
+        (("stay = 0.9", "stay = 1.5"), "trackers[1].stay"),
+    ],
+)
+def test_mmpmht_from_a_config_and_its_refusals(tmp_path, edit, message):
+    text = CLAIMED.replace('name = "J"\ntype = "jpda"', 'name = "J"\ntype = "mmpmht"\nnoise_scales = [1.0, 50.0]\nstay = 0.9')
+    path = tmp_path / "mt.toml"
+    path.write_text(text)
+    tr = load_experiment(path).plan.trackers[1]
+    assert tr.noise_scales == (1.0, 50.0) and tr.stay == 0.9
+    path.write_text(text.replace(*edit, 1))
+    with pytest.raises(ConfigError) as info:
+        load_experiment(path)
+    assert message in str(info.value)

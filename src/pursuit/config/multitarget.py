@@ -1,4 +1,4 @@
-"""Multi-target registrations: the built-in scenarios (``mt-*``) and the trackers (``gnn``, ``jpda``).
+"""Multi-target registrations: the built-in scenarios (``mt-*``), the trackers and the ``imm-cv`` per-track filter.
 
 A tracker table names its per-track filter as a filter table built against
 the scenario's matched models (``filter = {type = "kf"}``, the default), and
@@ -23,6 +23,7 @@ from ..multitarget.gnn import GNNTracker
 from ..multitarget.epmht import EPMHTTracker
 from ..multitarget.gmphd import BIRTH_MODES, GMPHDTracker
 from ..multitarget.jpda import JPDATracker
+from ..multitarget.mmpmht import MMPMHTTracker
 from ..multitarget.pmht import PMHTTracker
 from ..registry import Param, field_param, params_from, register
 from ..scenarios.multitarget import MultiTargetScenario, crossing, maneuvering_radar, williams15
@@ -213,6 +214,27 @@ def _epmht(scenario, where: str = "tracker", **kw):
     if "levels" in kw:
         kw["levels"] = tuple(float(v) for v in kw["levels"])
     return _build_tracker(EPMHTTracker, scenario, where, **_volume_for(scenario, kw))
+
+
+@register(
+    "tracker",
+    "mmpmht",
+    "Multiple-model PMHT: process-noise levels as a Markov chain estimated inside EM (exact EM; modes share F)",
+    params=(
+        *_tracker_params(MMPMHTTracker),
+        *params_from(MMPMHTTracker, list(_PMHT_DOCS), docs=_PMHT_DOCS),
+        *params_from(
+            MMPMHTTracker,
+            ["noise_scales", "stay"],
+            types={"noise_scales": "vector"},
+            docs={"noise_scales": "the modes' process noise as multiples of the motion model's Q", "stay": "the Markov chain's probability of keeping its mode"},
+        ),
+    ),
+    target=MMPMHTTracker,
+)
+def _mmpmht(scenario, where: str = "tracker", **kw):
+    kw["noise_scales"] = tuple(float(v) for v in kw["noise_scales"])
+    return _build_tracker(MMPMHTTracker, scenario, where, **_volume_for(scenario, kw))
 
 
 @register(
