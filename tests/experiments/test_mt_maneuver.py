@@ -238,3 +238,13 @@ def test_mmpmht_from_a_config_and_its_refusals(tmp_path, edit, message):
     with pytest.raises(ConfigError) as info:
         load_experiment(path)
     assert message in str(info.value)
+
+
+def test_imm_cv_default_modes_take_the_scenarios_q():
+    sc = _scenario("cv-position")  # q = 0.01 there, not 1
+    imm = build_filter({"type": "imm-cv"}, sc, "f")
+    assert [f.motion.q for f in imm.filters] == [sc.motion.q] * 3
+    assert [getattr(f.motion, "omega", 0.0) for f in imm.filters] == [0.0, 0.05, -0.05]
+    # a turn needs the discrete white-noise acceleration of ConstantTurn: Williams' CV is continuous
+    with pytest.raises(ValueError, match=r"f\.modes\[1\]\.omega: a turning mode has discrete white-noise acceleration only"):
+        build_filter({"type": "imm-cv"}, _scenario("mt-williams"), "f")

@@ -353,7 +353,7 @@ def _cv_mode(motion: ConstantVelocity, mode: dict[str, float]) -> Any:
         Param(
             "modes",
             "any",
-            [{"q": 1.0}, {"q": 1.0, "omega": 0.05}, {"q": 1.0, "omega": -0.05}],
+            [{}, {"omega": 0.05}, {"omega": -0.05}],
             "one table per mode: {q = acceleration variance (default: the scenario's), omega = turn rate in rad/s (default 0: CV)}",
             own=True,
             check=_modes,
