@@ -29,6 +29,7 @@ CATALOG: dict[str, list[tuple[str, str]]] = {
         ('ekf', 'Extended Kalman filter (Joseph form; numerical Jacobians if the model has none)'),
         ('ics-pf', 'Improved cuckoo-search particle filter (Wei & Guo, "WSN target tracking based on improved cuckoo particle filter algorithm"): shrinking step size and Pa, fitness-trend step; Metropolis-Hastings moves (acceptance = "greedy": the paper-literal search)'),
         ('imm', 'IMM over any filters built for the scenario (each [[...models]] entry is a filter table)'),
+        ('imm-cv', "IMM over modes on the scenario's constant-velocity state: CV with its own q, or a constant turn at rate omega (rad/s)"),
         ('imm-singer', 'IMM over Singer-model Kalman filters (EKFs for bearings) with different (alpha, sigma) (Tan et al.)'),
         ('kf', 'Linear Kalman filter (Joseph form)'),
         ('ms', 'Modified Singer filter: alpha and sigma estimated online from the acceleration autocorrelation'),
@@ -60,6 +61,7 @@ CATALOG: dict[str, list[tuple[str, str]]] = {
         ('gmphd', 'Gaussian-mixture PHD filter (Vo & Ma 2006): pruning, merging, estimates of weight >= extract, labels by tags'),
         ('gnn', 'Global nearest neighbour: 2-D assignment per scan within a chi-square gate'),
         ('jpda', 'Joint probabilistic data association: exact joint events within clusters, moment-matched update'),
+        ('mmpmht', 'Multiple-model PMHT: process-noise levels as a Markov chain estimated inside EM (exact EM; modes share F)'),
         ('pmht', 'Probabilistic multi-hypothesis tracker: EM over a sliding window of scans, a smoother per track (KF per-track filter)'),
     ],
 }

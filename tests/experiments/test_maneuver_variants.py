@@ -10,7 +10,7 @@ import pytest
 
 from pursuit.cli import main
 from pursuit.experiment import ConfigError, load_experiment
-from pursuit.experiments.maneuver import _log_ratio_interval
+from pursuit.experiments.maneuver import log_ratio_interval
 
 
 def test_p4_bearings_reproduces_with_a_verdict_per_claim(tmp_path, capsys):
@@ -38,7 +38,7 @@ def test_paired_log_ratio_interval_against_a_hand_computation():
     rf = np.array([1.0, 2.0, 2.0, 2.0])
     d = np.log(rf / rb)
     half = 3.182446305284263 * d.std(ddof=1) / 2.0  # t_{0.975, 3}
-    m, lo, hi = _log_ratio_interval(rb, rf)
+    m, lo, hi = log_ratio_interval(rb, rf)
     assert m == pytest.approx(d.mean()) and lo == pytest.approx(d.mean() - half) and hi == pytest.approx(d.mean() + half)
 
 

@@ -1,4 +1,4 @@
-"""Multi-target registrations: the built-in scenarios (``mt-*``) and the trackers (``gnn``, ``jpda``).
+"""Multi-target registrations: the built-in scenarios (``mt-*``), the trackers and the ``imm-cv`` per-track filter.
 
 A tracker table names its per-track filter as a filter table built against
 the scenario's matched models (``filter = {type = "kf"}``, the default), and
@@ -13,14 +13,22 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
+from ..filters.gaussian import CubatureKalmanFilter, ExtendedKalmanFilter, KalmanFilter, UnscentedKalmanFilter
+from ..filters.imm import InteractingMultipleModel
+from ..models.maneuver import ConstantTurn
+from ..models.motion import ConstantVelocity
 from ..multitarget.gnn import GNNTracker
 from ..multitarget.epmht import EPMHTTracker
 from ..multitarget.gmphd import BIRTH_MODES, GMPHDTracker
 from ..multitarget.jpda import JPDATracker
+from ..multitarget.mmpmht import MMPMHTTracker
 from ..multitarget.pmht import PMHTTracker
-from ..registry import Param, params_from, register
+from ..registry import Param, field_param, params_from, register
 from ..scenarios.multitarget import MultiTargetScenario, crossing, maneuvering_radar, williams15
 from .build import build_filter
+from .filters import GATE
 
 
 def _checked(where: str, build):
@@ -210,6 +218,27 @@ def _epmht(scenario, where: str = "tracker", **kw):
 
 @register(
     "tracker",
+    "mmpmht",
+    "Multiple-model PMHT: process-noise levels as a Markov chain estimated inside EM (exact EM; modes share F)",
+    params=(
+        *_tracker_params(MMPMHTTracker),
+        *params_from(MMPMHTTracker, list(_PMHT_DOCS), docs=_PMHT_DOCS),
+        *params_from(
+            MMPMHTTracker,
+            ["noise_scales", "stay"],
+            types={"noise_scales": "vector"},
+            docs={"noise_scales": "the modes' process noise as multiples of the motion model's Q", "stay": "the Markov chain's probability of keeping its mode"},
+        ),
+    ),
+    target=MMPMHTTracker,
+)
+def _mmpmht(scenario, where: str = "tracker", **kw):
+    kw["noise_scales"] = tuple(float(v) for v in kw["noise_scales"])
+    return _build_tracker(MMPMHTTracker, scenario, where, **_volume_for(scenario, kw))
+
+
+@register(
+    "tracker",
     "gmphd",
     "Gaussian-mixture PHD filter (Vo & Ma 2006): pruning, merging, estimates of weight >= extract, labels by tags",
     params=(
@@ -245,3 +274,102 @@ def _gmphd(scenario, where: str = "tracker", *, filter, p_detect, clutter_densit
     if max_speed is None:
         max_speed = getattr(scenario, "max_speed", None)
     return _checked(where, lambda: GMPHDTracker(filt, p_detect, clutter_density, max_speed=max_speed, **kw))
+
+
+# --------------------------------------------------------------------------
+# an IMM per track over the scenario's constant-velocity state
+# --------------------------------------------------------------------------
+_MODE_FILTERS = {"kf": KalmanFilter, "ekf": ExtendedKalmanFilter, "ukf": UnscentedKalmanFilter, "ckf": CubatureKalmanFilter}
+_MODE_KEYS = ("q", "omega")
+
+
+def _modes(field: str, value: Any) -> list[dict[str, float]]:
+    if not isinstance(value, list) or not value or not all(isinstance(m, dict) for m in value):
+        raise ValueError(f"{field}: expected a list of mode tables such as [{{q = 1.0}}, {{omega = 0.05}}]")
+    out = []
+    for i, mode in enumerate(value):
+        for key, v in mode.items():
+            if key not in _MODE_KEYS:
+                raise ValueError(f"{field}[{i}].{key}: unknown key for a mode (known: {', '.join(_MODE_KEYS)})")
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+                raise ValueError(f"{field}[{i}].{key}: expected a finite number, got {v!r}")
+        if mode.get("q", 0.0) < 0:
+            raise ValueError(f"{field}[{i}].q: must be a non-negative acceleration variance, got {mode['q']!r}")
+        out.append({k: float(v) for k, v in mode.items()})
+    return out
+
+
+def _mode_filter(cls, motion: Any, measurement: Any, name: str, where: str) -> Any:
+    try:
+        return cls(motion, measurement, name=name)
+    except TypeError as e:  # a KF on a nonlinear sensor
+        raise ValueError(f"{where}: {e}") from None
+
+
+def _mode_label(mode: dict[str, float], motion: ConstantVelocity) -> str:
+    q = mode.get("q", motion.q)
+    omega = mode.get("omega", 0.0)
+    return f"CV q={q:g}" if omega == 0.0 else f"CT {omega:+g} rad/s q={q:g}"
+
+
+def _imm_transition(field: str, value: Any) -> Any:
+    if isinstance(value, bool) or not isinstance(value, (int, float, list)):
+        raise ValueError(f"{field}: expected a staying probability or a matrix (list of rows), got {value!r}")
+    return value
+
+
+def _cv_layout(scenario: Any, where: str) -> Any:
+    """The scenario's motion model, refused (naming the field) unless it is a constant-velocity one."""
+    motion = getattr(scenario, "motion", None)
+    if not isinstance(motion, ConstantVelocity):
+        raise ValueError(
+            f"{where}.type: imm-cv needs a scenario with a constant-velocity motion model (state [x, vx, y, vy, ...]), "
+            f"got {type(motion).__name__}"
+        )
+    return motion
+
+
+def _cv_mode(motion: ConstantVelocity, mode: dict[str, float]) -> Any:
+    """One mode's motion model on the scenario's CV state (errors name the mode's key)."""
+    q = mode.get("q", motion.q)
+    omega = mode.get("omega", 0.0)
+    if omega == 0.0:
+        return ConstantVelocity(ndim=motion.ndim, dt=motion.dt, q=q, noise=motion.noise, layout=motion.layout)
+    if motion.ndim not in (2, 3):
+        raise ValueError(f"omega: a turn needs a 2-D or 3-D state, the scenario's has {motion.ndim} axes")
+    if motion.layout != "axis":
+        raise ValueError(f"omega: a turning mode needs the state per axis [x, vx, y, vy, ...], the scenario's CV has layout {motion.layout!r}")
+    if motion.noise != "discrete":
+        raise ValueError(f"omega: a turning mode has discrete white-noise acceleration only; the scenario's CV is {motion.noise!r}")
+    return ConstantTurn(omega=omega, q=q, ndim=motion.ndim, dt=motion.dt)
+
+
+@register(
+    "filter",
+    "imm-cv",
+    "IMM over modes on the scenario's constant-velocity state: CV with its own q, or a constant turn at rate omega (rad/s)",
+    params=(
+        field_param(InteractingMultipleModel, "name", doc="label in tables and figures (default: IMM)"),
+        Param(
+            "modes",
+            "any",
+            [{}, {"omega": 0.05}, {"omega": -0.05}],
+            "one table per mode: {q = acceleration variance (default: the scenario's), omega = turn rate in rad/s (default 0: CV)}",
+            own=True,
+            check=_modes,
+        ),
+        Param("mode_filter", "str", "ekf", "the filter of every mode (ekf: also exact for a linear sensor)", own=True, choices=tuple(_MODE_FILTERS)),
+        field_param(InteractingMultipleModel, "transition", doc="staying probability p_ii, or the full Markov matrix", check=_imm_transition),
+        field_param(InteractingMultipleModel, "initial_probs", type="vector", doc="initial mode probabilities (default uniform)"),
+        field_param(InteractingMultipleModel, "gate", doc="chi-square gate probability: reject a measurement outside every mode's gate (default: no gate)", check=GATE.check),
+    ),
+    target=InteractingMultipleModel,
+)
+def _imm_cv(scenario, where: str = "filter", *, name: str, modes, mode_filter: str, transition, initial_probs, gate):
+    motion = _cv_layout(scenario, where)
+    cls = _MODE_FILTERS[mode_filter]
+    filters = []
+    for i, mode in enumerate(modes):
+        model = _checked(f"{where}.modes[{i}]", lambda: _cv_mode(motion, mode))
+        filters.append(_mode_filter(cls, model, scenario.measurement, f"{mode_filter.upper()}-{_mode_label(mode, motion)}", f"{where}.mode_filter"))
+    return _checked(where, lambda: InteractingMultipleModel(filters, transition, initial_probs, name=name, gate=gate))

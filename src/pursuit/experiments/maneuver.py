@@ -57,7 +57,7 @@ from ..report.maneuver import Segment, detection_rates, mode_probabilities, rmse
 from ..results import MonteCarloResult
 from ..tables import ExperimentOutput, Table
 
-__all__ = ["ManeuverPlan"]
+__all__ = ["ManeuverPlan", "log_ratio_interval", "ratio_verdict"]
 
 FIGURE_PARAMS = (
     Param("zoom_at", "float", None, "onset time of the zoomed maneuver, s (default: the largest jump of the true acceleration)"),
@@ -299,7 +299,7 @@ def claims_table(result: MonteCarloResult, scenario: Any, base: str, adapt: str,
     return Table("claims", f"Paper P4's claims ({adapt} vs {base}) beside what we measured", ["claim", "paper", "measured"], rows, notes=PAPER_NOTE, kind="paper")
 
 
-def _log_ratio_interval(rb: np.ndarray, rf: np.ndarray) -> tuple[float, float, float]:
+def log_ratio_interval(rb: np.ndarray, rf: np.ndarray) -> tuple[float, float, float]:
     """Mean and 95 % paired t-interval of log(rf / rb) over runs."""
     d = np.log(rf) - np.log(rb)
     d = d[np.isfinite(d)]
@@ -308,6 +308,11 @@ def _log_ratio_interval(rb: np.ndarray, rf: np.ndarray) -> tuple[float, float, f
     half = float(stats.t.ppf(0.975, d.size - 1) * d.std(ddof=1) / np.sqrt(d.size))
     m = float(d.mean())
     return m, m - half, m + half
+
+
+def ratio_verdict(lo: float, hi: float) -> str:
+    """The verdict on "the filter's error is smaller" from the 95 % interval of log(error ratio)."""
+    return "holds" if hi < 0 else ("reversed" if lo > 0 else "not significant")
 
 
 def paired_claims_table(claims: list[dict[str, Any]], measured: dict[str, tuple[MonteCarloResult, np.ndarray]]) -> Table:
@@ -323,8 +328,8 @@ def paired_claims_table(claims: list[dict[str, Any]], measured: dict[str, tuple[
         idx = [p + off for p in result.position_indices]
         rb = _per_run_rmse(result, c["baseline"], idx, cells)
         rf = _per_run_rmse(result, c["filter"], idx, cells)
-        m, lo, hi = _log_ratio_interval(rb, rf)
-        verdict = "holds" if hi < 0 else ("reversed" if lo > 0 else "not significant")
+        m, lo, hi = log_ratio_interval(rb, rf)
+        verdict = ratio_verdict(lo, hi)
         rows.append(
             [
                 c["text"] or f"{c['filter']} more accurate than {c['baseline']}",

@@ -1,11 +1,22 @@
 """The ``multitarget`` experiment kind: several multi-target trackers on one scenario, scored by GOSPA.
 
 Sections: ``[scenario]`` (an ``mt-*`` scenario), ``[[trackers]]`` (``gnn``,
-``jpda``, each with its per-track filter), ``[metrics]`` (GOSPA's cut-off,
-order and α), ``[figures]``.  Every tracker sees the same truth and
-detections (common random numbers, one stream per run); all runs are
-tracked in one batch, so this kind does not chunk runs or use the Dask
-backend.
+``jpda``, ``pmht``, ``epmht``, ``gmphd``, each with its per-track filter),
+``[metrics]`` (GOSPA's cut-off, order and α), ``[figures]`` and
+``[[claim]]``.  Every tracker sees the same truth and detections (common
+random numbers, one stream per run); all runs are tracked in one batch, so
+this kind does not chunk runs or use the Dask backend.
+
+``[[claim]]``
+    A claim judged by a paired interval, as in the ``maneuver`` kind
+    (:func:`pursuit.experiments.maneuver.log_ratio_interval`): ``tracker``
+    against ``baseline`` over the scans ``scans = [first, last]`` (1-based,
+    inclusive; default all).  Each run gives one mean GOSPA per tracker over
+    those scans; the verdict comes from the 95 % paired t-interval of the
+    per-run log ratio ``log(GOSPA_tracker / GOSPA_baseline)``: "holds" when
+    the whole interval is below 0 (the tracker's GOSPA is smaller),
+    "reversed" when above, "not significant" otherwise.  The ``claims`` table
+    (kind ``paper``) gives the numbers and the verdict per claim.
 """
 
 from __future__ import annotations
@@ -18,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from .. import registry
+from .maneuver import log_ratio_interval, ratio_verdict
 from ..config.build import build_scenario, resolve_section
 from ..multitarget.metrics import gospa, gospa_summary, track_counts, track_switches
 from ..multitarget.tracking import MultiTrackResult
@@ -28,7 +40,7 @@ from ..scenarios.multitarget import MultiTargetScenario
 from ..tables import ExperimentOutput, Table
 from .montecarlo import check_run_exists, run_index
 
-__all__ = ["MultiTargetPlan", "TrackerScore", "score"]
+__all__ = ["MultiTargetPlan", "TrackerScore", "score", "claims_table"]
 
 SCENARIO_STREAM = 0  # the scenario's stream of each run (the trackers draw nothing)
 
@@ -55,6 +67,20 @@ METRIC_PARAMS = (
     Param("c", "float", 10.0, "GOSPA cut-off distance (position units)", check=_positive),
     Param("p", "float", 2.0, "GOSPA order p >= 1", check=_order),
     Param("alpha", "float", 2.0, "GOSPA alpha in (0, 2]; 2 gives the localisation / missed / false parts", check=_alpha),
+)
+def _scan_range(field_name: str, v: Any) -> list[int]:
+    if len(v) not in (0, 2) or any(float(x) != int(x) or x < 1 for x in v):
+        raise ValueError(f"{field_name}: expected [first, last], two scan numbers >= 1 (or [] for all scans), got {list(v)!r}")
+    if len(v) == 2 and v[0] > v[1]:
+        raise ValueError(f"{field_name}: first must not exceed last, got {list(v)!r}")
+    return [int(x) for x in v]
+
+
+CLAIM_PARAMS = (
+    Param("text", "str", "", "the claim in words"),
+    Param("baseline", "str", registry.REQUIRED, "the tracker it is compared against"),
+    Param("tracker", "str", registry.REQUIRED, "the tracker the claim is about"),
+    Param("scans", "vector", [], "[first, last]: the scans judged (1-based, inclusive; default: all)", check=_scan_range),
 )
 FIGURE_PARAMS = (Param("scene_run", "int", 0, "which run's truth, detections and tracks to draw (0 .. runs-1)", check=run_index),)
 
@@ -136,6 +162,34 @@ def summary_table(scores: list[TrackerScore], scenario: Any, runs: int, seed: in
     )
 
 
+def claims_table(claims: list[dict[str, Any]], gospa_total: dict[str, np.ndarray]) -> Table:
+    """One verdict per ``[[claim]]`` from each tracker's per-scan GOSPA ``(K, M)`` (see the module notes)."""
+    rows = []
+    for c in claims:
+        K = gospa_total[c["tracker"]].shape[0]
+        first, last = c["scans"] or [1, K]
+        if last > K:
+            raise ValueError(f"claim.scans: the scenario has {K} scans, got last = {last}")
+        rb = gospa_total[c["baseline"]][first - 1 : last].mean(axis=0)
+        rf = gospa_total[c["tracker"]][first - 1 : last].mean(axis=0)
+        m, lo, hi = log_ratio_interval(rb, rf)
+        rows.append([
+            c["text"] or f"{c['tracker']} has a smaller GOSPA than {c['baseline']}",
+            f"{first}-{last}", c["baseline"], c["tracker"],
+            float(np.median(rb)), float(np.median(rf)), float(np.exp(m)), float(np.exp(lo)), float(np.exp(hi)),
+            ratio_verdict(lo, hi),
+        ])  # fmt: skip
+    return Table(
+        "claims",
+        "Claims judged from the measured runs (paired over runs, common random numbers)",
+        ["claim", "scans", "baseline", "tracker", "baseline_median_gospa", "tracker_median_gospa", "ratio", "ratio_lo95", "ratio_hi95", "verdict"],
+        rows,
+        notes="ratio: geometric mean over runs of GOSPA_tracker / GOSPA_baseline (each run's mean GOSPA over the judged scans), "
+        "with its 95 % paired t-interval; holds: the whole interval below 1; reversed: above 1.",
+        kind="paper",
+    )
+
+
 @dataclass
 class MultiTargetPlan:
     """A validated ``multitarget`` experiment."""
@@ -146,6 +200,7 @@ class MultiTargetPlan:
     metrics: dict[str, float]
     figure_opts: dict[str, Any]
     sections: dict[str, Any] = field(repr=False)
+    claims: list[dict[str, Any]] = field(default_factory=list)
 
     def check_runs(self, runs: int) -> None:
         """Raise ``ValueError`` (naming the field) when an option refers to a run beyond ``runs``."""
@@ -168,17 +223,19 @@ class MultiTargetPlan:
             scores.append(score(tracker.name, result, truth, pos, self.metrics, wall))
             if progress:
                 print(f"  {tracker.name}: {wall:.2f} s", flush=True)
-        table = summary_table(scores, self.scenario, runs, seed, self.metrics)
+        tables = [summary_table(scores, self.scenario, runs, seed, self.metrics)]
+        if self.claims:
+            tables.insert(0, claims_table(self.claims, {s.name: np.asarray(s.gospa.total) for s in scores}))
         run = self.figure_opts["scene_run"]
         figs = {
             "gospa": gospa_over_time({s.name: s.summary for s in scores}, scans.times, self.metrics),
             "scene": scene(truth, scans, {s.name: s.result for s in scores}, pos, run, title_prefix=self.scenario.name),
         }
         results = {f"gospa_{s.name}": np.asarray(s.gospa.total) for s in scores}
-        return ExperimentOutput(self.name, "", "", [table], figs, results=results)
+        return ExperimentOutput(self.name, "", "", tables, figs, results=results)
 
 
-_KNOWN_SECTIONS = {"scenario", "trackers", "metrics", "figures"}
+_KNOWN_SECTIONS = {"scenario", "trackers", "metrics", "figures", "claim"}
 
 
 def build_trackers(sections: dict[str, Any], scenario: Any) -> list[Any]:
@@ -207,7 +264,7 @@ def build_trackers(sections: dict[str, Any], scenario: Any) -> list[Any]:
 @register(
     "experiment",
     "multitarget",
-    "Compare multi-target trackers on one scenario by GOSPA; sections [scenario], [[trackers]], [metrics], [figures]",
+    "Compare multi-target trackers on one scenario by GOSPA; sections [scenario], [[trackers]], [metrics], [figures], [[claim]] (paired verdicts)",
 )
 def _multitarget(sections: dict[str, Any], path: Path, name: str) -> MultiTargetPlan:
     for key in sections:
@@ -217,4 +274,23 @@ def _multitarget(sections: dict[str, Any], path: Path, name: str) -> MultiTarget
     trackers = build_trackers(sections, scenario)
     metrics = resolve_section(sections, "metrics", METRIC_PARAMS)
     figure_opts = resolve_section(sections, "figures", FIGURE_PARAMS)
-    return MultiTargetPlan(name, scenario, trackers, metrics, figure_opts, sections)
+    claims = resolve_claims(sections, [t.name for t in trackers], scenario.steps)
+    return MultiTargetPlan(name, scenario, trackers, metrics, figure_opts, sections, claims)
+
+
+def resolve_claims(sections: dict[str, Any], names: list[str], steps: int) -> list[dict[str, Any]]:
+    """Check the ``[[claim]]`` tables: known tracker names, scans within the scenario's."""
+    entries = sections.get("claim", [])
+    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+        raise ValueError("claim: expected [[claim]] tables")
+    out = []
+    for i, entry in enumerate(entries):
+        where = f"claim[{i}]"
+        c = registry.Component("section", "claim", "", CLAIM_PARAMS, dict).resolve(entry, where)
+        for key in ("baseline", "tracker"):
+            if c[key] not in names:
+                raise ValueError(f"{where}.{key}: no tracker named {c[key]!r} (have {', '.join(names)})")
+        if c["scans"] and c["scans"][1] > steps:
+            raise ValueError(f"{where}.scans: the scenario has {steps} scans, got last = {c['scans'][1]}")
+        out.append(c)
+    return out

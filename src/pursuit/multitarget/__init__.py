@@ -9,6 +9,7 @@ from .epmht import EPMHTTracker
 from .gmphd import GMPHDResult, GMPHDTracker
 from .gnn import GNNTracker
 from .jpda import JPDATracker
+from .mmpmht import MMPMHTTracker
 from .pmht import PMHTResult, PMHTTracker
 from .metrics import (
     Gospa,
@@ -36,6 +37,7 @@ __all__ = [
     "GNNTracker",
     "Gospa",
     "JPDATracker",
+    "MMPMHTTracker",
     "MultiTrackResult",
     "PMHTResult",
     "PMHTTracker",

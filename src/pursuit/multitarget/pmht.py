@@ -49,7 +49,7 @@ from ..rng import RNGLike
 from .management import initiate, new_table, update_counts
 from .tracking import MultiTrackResult, TrackerBase, _as_initial, _layout_motion, checked_scans
 
-__all__ = ["PMHTTracker", "PMHTResult", "WindowFit", "LinearModel", "Maneuver", "em_window", "linear_model"]
+__all__ = ["PMHTTracker", "PMHTResult", "WindowFit", "LinearModel", "Maneuver", "NoiseModes", "em_window", "linear_model"]
 
 
 
@@ -145,7 +145,8 @@ class WindowFit:
         ``(max_iter + 1, M)`` objective after each M-step (index 0: at the
         start), NaN after a run stopped.
     mode_probs, mode_filtered
-        EPMHT only: ``(M, L, B, A, J)`` smoothed and filtered maneuver-level probabilities.
+        EPMHT only: ``(M, L, B, A, J)`` smoothed and filtered maneuver-level probabilities
+        (the multiple-model PMHT: its noise modes', ``A = 1``).
     """
 
     mean: np.ndarray
@@ -180,6 +181,25 @@ class Maneuver:
     posteriors: Callable[..., tuple[np.ndarray, np.ndarray]]
 
 
+@dataclass(frozen=True)
+class NoiseModes:
+    """The multiple-model PMHT's process-noise modes (:mod:`pursuit.multitarget.mmpmht`).
+
+    Mode j has the process noise ``scales[j] Q``; Π ``(J, J)``; the mode
+    probabilities ``(M, L, 1, J)`` at each slot's prior scan (one "axis", so
+    the tracker carries them as EPMHT's); ``posteriors`` (the E-step's
+    forward–backward pass over the modes, which also gives the process term
+    of the objective) and ``process_noise`` (the M-step's per-slot Q) come
+    from the module that builds on this one.
+    """
+
+    scales: np.ndarray
+    transition: np.ndarray
+    prior: np.ndarray
+    posteriors: Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray]]
+    process_noise: Callable[..., np.ndarray]
+
+
 def em_window(
     model: LinearModel,
     prior_mean: np.ndarray,
@@ -194,7 +214,7 @@ def em_window(
     estimate_priors: bool = False,
     max_iter: int = 20,
     tol: float = 1e-6,
-    maneuver: Maneuver | None = None,
+    maneuver: Maneuver | NoiseModes | None = None,
 ) -> WindowFit:
     """Run PMHT's EM on one window of B scans for all runs and track slots.
 
@@ -223,7 +243,11 @@ def em_window(
         At most ``max_iter`` M-steps; a run stops when
         ``|L_i − L_{i−1}| ≤ tol |L_{i−1}|``.
     maneuver
-        EPMHT: the maneuver chain (see :mod:`pursuit.multitarget.epmht`).
+        EPMHT: the maneuver chain (see :mod:`pursuit.multitarget.epmht`);
+        or the multiple-model PMHT's noise modes (:class:`NoiseModes`): the
+        modes are missing data too, the objective's process term is
+        ``log Σ_modes p(X | modes) P(modes)`` and the M-step smooths with
+        each slot's and step's mode-averaged precision.
     """
     B, M, D, m = z.shape
     L, n = prior_mean.shape[1], prior_mean.shape[-1]
@@ -262,12 +286,17 @@ def em_window(
 
     every = np.arange(M)
     X = np.array(start, dtype=float)
-    maneuvers = maneuver is not None and maneuver.levels.size > 0 and model.inputs.shape[1] > 0
+    modes = maneuver if isinstance(maneuver, NoiseModes) else None
+    maneuvers = modes is None and maneuver is not None and maneuver.levels.size > 0 and model.inputs.shape[1] > 0
     ubar = np.zeros((M, L, B, model.inputs.shape[1]))
     w, w0, assoc = estep(every, X, log_c, log_pi)
-    objective = assoc + _process_loglik(model, X, ubar, prior_mean, prior_cov, first, active)
-    smoothed: tuple[np.ndarray, ...] | None = None
     gamma = alpha = None
+    if modes is None:
+        objective = assoc + _process_loglik(model, X, ubar, prior_mean, prior_cov, first, active)
+    else:  # the mode posteriors at the current states: the E-step for the modes, and the process term
+        gamma, alpha, proc = modes.posteriors(model, modes, X, prior_mean, prior_cov, first, active)
+        objective = assoc + proc
+    smoothed: tuple[np.ndarray, ...] | None = None
     history = np.full((max_iter + 1, M), np.nan)
     history[0] = objective
     iterations = np.zeros(M, dtype=np.int64)
@@ -304,7 +333,8 @@ def em_window(
             H = np.broadcast_to(H, (*Xr.shape[:-1], *H.shape[-2:]))  # a shared Jacobian, per slot and step
             nu = np.einsum("mlbd,mlbdi->mlbi", wr, _residuals(model, zt[r], Xr)) / np.where(W > 0, W, 1.0)[..., None]
             zs = np.einsum("mlbij,mlbj->mlbi", H, Xr) + nu
-        new = _smooth(model, pm, pc, ar, ar & (W > 0), zs, W, ubar[r], H)
+        Qs = None if modes is None else modes.process_noise(model, modes, gamma[r], pc, fr, ar)
+        new = _smooth(model, pm, pc, ar, ar & (W > 0), zs, W, ubar[r], H, Qs)
         if smoothed is None:
             smoothed = new
         else:
@@ -313,7 +343,12 @@ def em_window(
         X = smoothed[0]
         w_new, w0_new, assoc = estep(r, X[r], log_c[r], log_pi[r])
         w[r], w0[r] = w_new, w0_new
-        value = assoc + _process_loglik(model, X[r], ubar[r], pm, pc, fr, ar)
+        if modes is None:
+            value = assoc + _process_loglik(model, X[r], ubar[r], pm, pc, fr, ar)
+        else:
+            g, a, proc = modes.posteriors(model, replace(modes, prior=modes.prior[r]), X[r], pm, pc, fr, ar)
+            gamma[r], alpha[r] = g, a
+            value = assoc + proc
         iterations[r] = it
         history[it, r] = value
         converged = np.abs(value - objective[r]) <= tol * np.abs(objective[r])
@@ -335,11 +370,13 @@ def _smooth(
     W: np.ndarray,
     ubar: np.ndarray,
     H: np.ndarray,
+    Qs: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """KF on the synthetic measurements (R / W) then RTS, for all slots; before a track's first step its state is held.
 
     ``active (M, L, B)``: the track exists at the step; ``measured``: active and W > 0;
-    ``H``: ``(m, n)``, or ``(M, L, B, m, n)`` per slot and step (a linearised sensor).
+    ``H``: ``(m, n)``, or ``(M, L, B, m, n)`` per slot and step (a linearised sensor);
+    ``Qs``: ``(M, L, B, n, n)`` process noise per slot and step instead of the model's (multiple-model PMHT).
     """
     M, L, B, _ = zs.shape
     n = prior_mean.shape[-1]
@@ -351,7 +388,8 @@ def _smooth(
     Pp = np.empty((M, L, B, n, n))
     C = np.empty((M, L, B, n, n))
     for b in range(B):
-        F, Q = model.F[b], model.Q[b]
+        F = model.F[b]
+        Q = model.Q[b] if Qs is None else Qs[:, :, b]
         step = active[..., b]  # before its first step a track holds its prior (the smoother gain is then I-like)
         u = np.einsum("ma,...m->...a", model.inputs[b], ubar[:, :, b]) if model.inputs.shape[1] else 0.0
         x_pred = np.einsum("ij,...j->...i", F, x) + u

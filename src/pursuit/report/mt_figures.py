@@ -8,7 +8,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
-from .figures import legend_beside
+from .figures import distinguish, legend_beside
 
 __all__ = ["gospa_over_time", "scene"]
 
@@ -46,10 +46,12 @@ def gospa_over_time(summaries: Mapping[str, Mapping[str, Any]], times: np.ndarra
     top.set_title(f"GOSPA per scan, mean over runs with 95 % band (c = {c:g}, p = {p:g}, α = {a:g})", fontsize=10)
     top.set_ylim(bottom=0)
     top.grid(alpha=0.3)
+    distinguish(top)  # trackers that agree (GNN and JPDA on a clean scene) must not hide each other
+    styles = {name: line.get_linestyle() for name, line in zip(summaries, top.lines)}
     legend_beside(top)
     for ax, (key, title) in zip(parts, _PARTS):
         for name, s in summaries.items():
-            ax.plot(t, s[key].per_scan, color=colors[name])
+            ax.plot(t, s[key].per_scan, color=colors[name], linestyle=styles[name])
         ax.set_title(title, fontsize=9)
         ax.set_xlabel("time (s)")
         ax.xaxis.set_major_locator(MaxNLocator(4))
