@@ -1,7 +1,8 @@
 """How pursuit's PMHT and GM-PHD time per scan grows with targets, false alarms and window length.
 
 ``python benchmarks/bench_pmht.py --growth`` runs :func:`growth`: a small grid, each point the fastest
-of 5 timings of all runs in one batch (the least disturbed by other jobs on a shared machine), on one core, printed as a markdown table with the fitted
+of 5 timings of all runs in one batch, taken round-robin over the grid (the least disturbed by other
+jobs on a shared machine), on one core, printed as a markdown table with the fitted
 growth exponents and drawn to ``docs/img/pmht_cost_growth.png``.
 
 Work: N constant-velocity targets (q = 0.02, speed 1 m/s in random directions) spread over a
@@ -46,31 +47,33 @@ def scene(n_targets: int, clutter_rate: float) -> MultiTargetScenario:
     return MultiTargetScenario(targets, motion, sensor, [[0.0, SIDE], [0.0, SIDE]], clutter_rate, 0.9, STEPS, 1.0, "growth", max_speed=5.0)
 
 
-def _time_per_scan(n_targets: int, clutter_rate: float, batch: int | None) -> float:
-    """Seconds per run-scan of PMHT (``batch`` given) or GM-PHD (``batch`` None)."""
+def _job(n_targets: int, clutter_rate: float, batch: int | None):
+    """A call that tracks all runs once with PMHT (``batch`` given) or GM-PHD (``batch`` None)."""
     sc = scene(n_targets, clutter_rate)
     truth, scans = sc.simulate(run_streams(7, range(RUNS), 0), RUNS)
     kf = KalmanFilter(sc.motion, sc.measurement)
     if batch is None:
         tracker = GMPHDTracker(kf, sc.p_detect, sc.clutter_density, max_speed=sc.max_speed)
+        return lambda: tracker.track(scans.z, times=scans.times)
+    F = np.asarray(sc.motion.transition_matrix(None))
+    prior = np.einsum("ij,mnj->mni", np.linalg.inv(F), truth.states[0])
+    initial = Gaussian(prior, np.broadcast_to(np.eye(4), (*prior.shape, 4)))
+    tracker = PMHTTracker(kf, sc.p_detect, sc.clutter_density, batch=batch, max_iter=10, max_misses=10**6)
+    return lambda: tracker.track(scans.z, times=scans.times, initial=initial)
 
-        def go():
-            tracker.track(scans.z, times=scans.times)
 
-    else:
-        F = np.asarray(sc.motion.transition_matrix(None))
-        prior = np.einsum("ij,mnj->mni", np.linalg.inv(F), truth.states[0])
-        initial = Gaussian(prior, np.broadcast_to(np.eye(4), (*prior.shape, 4)))
-        tracker = PMHTTracker(kf, sc.p_detect, sc.clutter_density, batch=batch, max_iter=10, max_misses=10**6)
+def _fastest(jobs: list, rounds: int) -> np.ndarray:
+    """Seconds per run-scan of each job: the fastest of ``rounds`` rounds over all jobs in turn.
 
-        def go():
-            tracker.track(scans.z, times=scans.times, initial=initial)
-
-    best = np.inf
-    for _ in range(5):
-        t0 = time.perf_counter()
-        go()
-        best = min(best, time.perf_counter() - t0)
+    Round-robin, so that a burst of load from other jobs on a shared machine slows one timing of
+    many points rather than every timing of a few neighbouring points.
+    """
+    best = np.full(len(jobs), np.inf)
+    for _ in range(rounds):
+        for i, job in enumerate(jobs):
+            t0 = time.perf_counter()
+            job()
+            best[i] = min(best[i], time.perf_counter() - t0)
     return best / (RUNS * STEPS)
 
 
@@ -90,21 +93,26 @@ def growth(quick: bool = False, figure=None) -> dict:
         "false alarms per scan": (CLUTTER[:3] if quick else CLUTTER, lambda v, b: (4, v, b)),
         "window length B (scans)": (BATCHES[:3] if quick else BATCHES, None),
     }
+    points = []  # (sweep, value, batch or None)
+    for name, (values, args) in sweeps.items():
+        for v in values:
+            if args is None:
+                points.append((name, v, (4, 10.0, int(v))))
+            else:
+                points.append((name, v, args(v, 5)))
+                points.append((name, v, args(v, None)))
+    times = _fastest([_job(*p[2]) for p in points], 2 if quick else 5)
     out: dict = {}
     print("| sweep | value | PMHT ms per run-scan | GM-PHD ms per run-scan |")
     print("|---|---|---|---|")
-    for name, (values, args) in sweeps.items():
-        pm, gm = [], []
-        for v in values:
-            if args is None:
-                pm.append(_time_per_scan(4, 10.0, int(v)))
-                gm.append(np.nan)
-            else:
-                pm.append(_time_per_scan(*args(v, 5)))
-                gm.append(_time_per_scan(*args(v, None)))
-            g = f"{1e3 * gm[-1]:.2f}" if np.isfinite(gm[-1]) else "–"
-            print(f"| {name} | {v:g} | {1e3 * pm[-1]:.2f} | {g} |")
-        out[name] = (np.asarray(values, float), np.asarray(pm), np.asarray(gm))
+    for name, (values, _) in sweeps.items():
+        pm = np.array([t for p, t in zip(points, times) if p[0] == name and p[2][2] is not None])
+        gm = np.array([t for p, t in zip(points, times) if p[0] == name and p[2][2] is None])
+        gm = gm if gm.size else np.full(len(values), np.nan)
+        for v, a, b in zip(values, pm, gm):
+            g = f"{1e3 * b:.2f}" if np.isfinite(b) else "–"
+            print(f"| {name} | {v:g} | {1e3 * a:.2f} | {g} |")
+        out[name] = (np.asarray(values, float), pm, gm)
     print()
     for name, (x, pm, gm) in out.items():
         g = f", GM-PHD ~ x^{_slope(x, gm):.2f}" if np.isfinite(gm).all() else ""
