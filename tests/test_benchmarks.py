@@ -119,3 +119,15 @@ def test_pmht_cost_growth_quick_mode(tmp_path):
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     assert "PMHT ~ x^" in proc.stdout and (tmp_path / "g.png").stat().st_size > 10_000
+
+
+def test_gmphd_benchmark_quick_mode():
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "run.py"), "--quick", "--only", "gmphd"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "| pursuit GM-PHD, the same fixed birth | 3 |" in proc.stdout
+    assert "| pursuit GM-PHD, adaptive two-point births (its default) | 3 |" in proc.stdout
