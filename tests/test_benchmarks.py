@@ -93,3 +93,41 @@ def test_multi_target_benchmark_quick_mode():
     )
     assert proc.returncode == 0, proc.stderr
     assert "| pursuit GNN | 10 |" in proc.stdout and "| pursuit JPDA | 10 |" in proc.stdout
+
+
+def test_pmht_benchmark_quick_mode():
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "run.py"), "--quick", "--only", "pmht"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "| pursuit PMHT | 3 |" in proc.stdout
+    assert "| pursuit PMHT, own initiation and termination | 3 |" in proc.stdout
+    # the clutter-prior case: pursuit's track ignores the false alarm 6 m away (its error is far below 6 m / 2)
+    row = next(line for line in proc.stdout.splitlines() if line.startswith("| pursuit PMHT (estimate_priors) |"))
+    assert float(row.split("|")[2]) < 0.5
+
+
+def test_pmht_cost_growth_quick_mode(tmp_path):
+    code = (
+        "import sys; sys.path.insert(0, {bench!r}); import _one_core; _one_core.pin(); from pathlib import Path; "
+        "from _pmht_growth import growth; out = growth(quick=True, figure=Path({png!r})); "
+        "print(sorted(out))"
+    ).format(bench=str(ROOT / "benchmarks"), png=str(tmp_path / "g.png"))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    assert "PMHT ~ x^" in proc.stdout and (tmp_path / "g.png").stat().st_size > 10_000
+
+
+def test_gmphd_benchmark_quick_mode():
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "run.py"), "--quick", "--only", "gmphd"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "| pursuit GM-PHD, the same fixed birth | 3 |" in proc.stdout
+    assert "| pursuit GM-PHD, adaptive two-point births (its default) | 3 |" in proc.stdout
