@@ -119,6 +119,7 @@ def floor(quick: bool = False, repeat: int = 3) -> dict[str, float]:
     from pursuit._compiled.particle import measurement_args
     from pursuit._compiled.specs import measurement_spec
     from pursuit.filters.cuckoo import mantegna_sigma
+    from pursuit.filters.cuckoo_mh import noise_factor
 
     numba.set_num_threads(1)
     runs, steps, N = (20, 30, 200) if quick else (100, 100, 200)
@@ -164,9 +165,10 @@ def floor(quick: bool = False, repeat: int = 3) -> dict[str, float]:
     fitness_loop(*args, 1)
     fit = _cpu_time(lambda: fitness_loop(*args, reps), repeat) / (reps * N)
     u, v = rng.standard_normal(N), rng.standard_normal(N)
+    assert cs.search.beta == 1.5  # the cbrt branch of the Lévy step, timed below
     levy_loop(u, v, mantegna_sigma(1.5), 1)
     levy = _cpu_time(lambda: levy_loop(u, v, mantegna_sigma(1.5), reps), repeat) / (reps * N)
-    r = cs.motion.noise_factor(1, 1.0).shape[1] if hasattr(cs.motion, "noise_factor") else 2
+    r = noise_factor(sc.motion, 1, 1.0).shape[1]  # Mantegna entries per Lévy proposal
     ns = {
         "pf_particle_step": pf / ps * 1e9,
         "cuckoo_step_without_moves": t0 / ps * 1e9,
