@@ -84,6 +84,23 @@ def test_upf_benchmark_quick_mode():
         assert row in proc.stdout
 
 
+def test_p1_benchmark_and_its_floor_quick_mode():
+    pytest.importorskip("numba")
+    for extra, rows in (
+        ([], ("| PF |", "| CS-PF (mh) |", "| ICS-PF (greedy) |", "PF + CS-PF + ICS-PF (mh):")),
+        (["--floor"], ("| one MH proposal", "| one Lévy step entry", "4x the PF needs")),
+    ):
+        proc = subprocess.run(
+            [sys.executable, str(ROOT / "benchmarks" / "bench_p1.py"), "--quick", "--repeat", "1", *extra],
+            capture_output=True,
+            text=True,
+            timeout=900,
+        )
+        assert proc.returncode == 0, proc.stderr
+        for row in rows:
+            assert row in proc.stdout, (extra, row)
+
+
 def test_multi_target_benchmark_quick_mode():
     proc = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks" / "run.py"), "--quick", "--only", "mt"],

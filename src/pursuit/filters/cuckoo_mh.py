@@ -36,6 +36,10 @@ keep the posterior instead of climbing the likelihood.  One step:
      per half and iteration.  Symmetric: (p1, p2) and (p2, p1) are equally
      likely and nothing depends on ξ_i.  A half whose other half has fewer
      than two particles (N < 4) makes no discovery proposals.
+   * The test log u < Δ is evaluated as ``u − 1 < Δ or log u < Δ``: the
+     same decision (log u ≤ u − 1, and u − 1 is exact for NumPy's uniforms,
+     so a faithfully rounded log keeps the bound), and the compiled kernel
+     then skips the logarithm for most accepted moves.
    * α(t) and Pa(t) are the search's schedules.  With ``trend`` on, the
      fitness-trend factor of paper eq. 10 is computed per half from the
      OTHER half's mean fitness f̄ = mean exp(ℓ) at the start of iterations t
@@ -202,7 +206,9 @@ def mh_moves(
         Xn = _x_of(m[..., sl, :], prop, G)
         Fn = np.asarray(fitness(Xn), dtype=float)
         LTn = _log_prior(prop) + Fn
-        ok = np.log(u) < LTn - LT[..., sl]
+        d = LTn - LT[..., sl]
+        # log u < Δ, with the bound log u ≤ u − 1 tried first as the compiled kernel does (module docstring)
+        ok = (u - 1.0 < d) | (np.log(u) < d)
         okx = ok[..., None]
         xi[..., sl, :] = np.where(okx, prop, xi[..., sl, :])
         X[..., sl, :] = np.where(okx, Xn, X[..., sl, :])
