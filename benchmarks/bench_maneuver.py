@@ -155,7 +155,7 @@ def _print(rows: list[dict], fp: float | None) -> None:
     for r in rows:
         ratio = f"{r['rate'] / fp:.1f}x" if fp else "n/a (filterpy not installed)"
         r["vs_filterpy"] = r["rate"] / fp if fp else None
-        print(f"| {r['implementation']} | {r['runs']} x {r.get('steps', 98)} | {r['rate'] / 1e3:.1f} | {ratio} |")
+        print(f"| {r['implementation']} | {r['runs']} x {r.get('steps', 98)} | {r['rate'] / 1e3:.3g} | {ratio} |")
 
 
 def main(quick: bool = False, bearings_only: bool = False) -> list[dict]:
