@@ -17,6 +17,10 @@ nothing keeps P⁻ itself).  A run whose
 covariance or innovation covariance does not factor (the NumPy filters
 would repair it) is flagged in ``ok`` and recomputed by the caller with
 NumPy.
+
+The measurement half of each step (:func:`_ekf_correct`, :func:`_sigma_correct`)
+is also a kernel of its own, :func:`correct_serial` / :func:`correct_parallel`,
+for a filter that forms its prediction itself (the CS-model filter).
 """
 
 from __future__ import annotations
