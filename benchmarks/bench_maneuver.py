@@ -13,16 +13,17 @@ Rows:
   of one, run after run (what a loop over runs would cost).
 * ``FilterPy IMM-Singer``: ``filterpy.kalman.IMMEstimator`` over three
   ``KalmanFilter`` objects with the same Singer F and Q, one run at a time.
-* ``pursuit ACS-EKF / ACS-UKF, bearings 3-D``: the joint CS-model filter
-  (``NonlinearCSFilter``, α and a_max adapted) on the ``bearings`` scenario
-  (azimuth and elevation, strong maneuvers, 138 steps), batched and one run at
-  a time.  NumPy only: there is no compiled path for it or for the moving
-  observer's angles.
+* ``pursuit CS-EKF / ACS-EKF / ACS-UKF, bearings 3-D``: the joint CS-model
+  filter (``NonlinearCSFilter``: fixed, or α and a_max adapted) on the
+  ``bearings`` scenario (azimuth and elevation, strong maneuvers, 138 steps),
+  batched and one run at a time, with the NumPy backend and (``[numba]``
+  rows, if numba is importable) the compiled measurement updates.
 
 Run::
 
-    .venv/bin/python benchmarks/bench_maneuver.py          # FilterPy row if filterpy is importable
-    make bench                                               # all benchmarks, peers in .bench-venv
+    .venv/bin/python benchmarks/bench_maneuver.py              # FilterPy row if filterpy is importable
+    .venv/bin/python benchmarks/bench_maneuver.py --bearings   # only the bearings rows, NumPy and numba
+    make bench                                                   # all benchmarks, peers in .bench-venv
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ def _time(fn, repeats: int = REPEATS) -> float:
     return median_time(fn, repeats)
 
 
-BEARINGS = ("ACS-EKF", "ACS-UKF")
+BEARINGS = ("CS-EKF", "ACS-EKF", "ACS-UKF")
 
 
 def _work(runs: int, name: str = ""):
@@ -53,11 +54,15 @@ def _work(runs: int, name: str = ""):
     return sc, sc.simulate(run_streams(0, range(runs), 0), runs)
 
 
-def _filters(sc):
+def _filters(sc, backend: str = "numpy"):
     meas = sc.measurement
     if isinstance(sc, BearingsOnlyTarget):
-        kw = dict(adaptation="limit", alpha0=0.05, a_max=2.0, a_max_cap=20.0, fading="none")
-        return {"ACS-EKF": NonlinearCSFilter(meas, **kw), "ACS-UKF": NonlinearCSFilter(meas, update="ukf", **kw)}
+        kw = dict(adaptation="limit", alpha0=0.05, a_max=2.0, a_max_cap=20.0, fading="none", backend=backend)
+        return {
+            "CS-EKF": NonlinearCSFilter(meas, adaptation="none", alpha0=0.05, a_max=10.0, backend=backend),
+            "ACS-EKF": NonlinearCSFilter(meas, **kw),
+            "ACS-UKF": NonlinearCSFilter(meas, update="ukf", **kw),
+        }
     return {
         "CS": CurrentStatisticalFilter(meas),
         "APCS": AdaptiveCSFilter(meas),
@@ -68,18 +73,18 @@ def _filters(sc):
     }
 
 
-def pursuit_rate(name: str, runs: int) -> float:
+def pursuit_rate(name: str, runs: int, backend: str = "numpy") -> float:
     """Filter-steps per second, all runs in one batch."""
     sc, sim = _work(runs, name)
-    filt = _filters(sc)[name]
+    filt = _filters(sc, backend)[name] if name in BEARINGS else _filters(sc)[name]
     t = _time(lambda: pu.run(filt, sim.measurements, sim.prior, keep_cov=False))
     return runs * sc.steps / t
 
 
-def pursuit_loop_rate(name: str, runs: int) -> float:
+def pursuit_loop_rate(name: str, runs: int, backend: str = "numpy") -> float:
     """Filter-steps per second when the same filter is called one run at a time."""
     sc, sim = _work(runs, name)
-    filt = _filters(sc)[name]
+    filt = _filters(sc, backend)[name] if name in BEARINGS else _filters(sc)[name]
 
     def go():
         for i in range(runs):
@@ -121,34 +126,59 @@ def filterpy_rate(runs: int) -> float | None:
     return runs * sc.steps / _time(go)
 
 
-def main(quick: bool = False) -> list[dict]:
-    """Measure and print a markdown table; returns the rows."""
-    runs = 100 if quick else 1000
-    loop_runs = 5 if quick else 20
+def bearings_rows(runs: int, loop_runs: int) -> list[dict]:
+    """The bearings rows: CS-EKF and ACS-UKF (ACS-EKF batched only), batched and one run at a time, NumPy and numba."""
+    from pursuit.compute import numba_available
+
+    backends = ("numpy", "numba") if numba_available() else ("numpy",)
+    steps = BearingsOnlyTarget(dims=3).steps
+    if "numba" in backends:  # compile outside the timings
+        for name in BEARINGS:
+            pursuit_rate(name, 2, "numba")
     rows = []
-    for name in ("CS", "APCS", "MS", "IMM-Singer"):
-        rows.append({"implementation": f"pursuit {name}", "runs": runs, "rate": pursuit_rate(name, runs)})
-    steps_b = BearingsOnlyTarget(dims=3).steps
-    for name in BEARINGS:
-        rows.append({"implementation": f"pursuit {name}, bearings 3-D", "runs": runs, "steps": steps_b, "rate": pursuit_rate(name, runs)})
-    rows.append(
-        {"implementation": "pursuit ACS-EKF, bearings 3-D, one run at a time", "runs": loop_runs, "steps": steps_b, "rate": pursuit_loop_rate("ACS-EKF", loop_runs)}
-    )
-    rows.append({"implementation": "pursuit APCS, one run at a time", "runs": loop_runs, "rate": pursuit_loop_rate("APCS", loop_runs)})
-    rows.append({"implementation": "pursuit IMM-Singer, one run at a time", "runs": loop_runs, "rate": pursuit_loop_rate("IMM-Singer", loop_runs)})
-    fp = filterpy_rate(loop_runs)
-    if fp is not None:
-        rows.append({"implementation": "FilterPy IMM-Singer (one run at a time)", "runs": loop_runs, "rate": fp})
+    for backend in backends:
+        tag = "" if backend == "numpy" else " [numba]"
+        for name in BEARINGS:
+            rate = pursuit_rate(name, runs, backend)
+            rows.append({"implementation": f"pursuit {name}, bearings 3-D{tag}", "runs": runs, "steps": steps, "rate": rate})
+        for name in ("CS-EKF", "ACS-UKF"):
+            rows.append({
+                "implementation": f"pursuit {name}, bearings 3-D, one run at a time{tag}",
+                "runs": loop_runs, "steps": steps, "rate": pursuit_loop_rate(name, loop_runs, backend),
+            })
+    return rows
+
+
+def _print(rows: list[dict], fp: float | None) -> None:
     print("| implementation | runs x steps | k filter-steps/s | vs FilterPy IMM |")
     print("|---|---|---|---|")
     for r in rows:
         ratio = f"{r['rate'] / fp:.1f}x" if fp else "n/a (filterpy not installed)"
         r["vs_filterpy"] = r["rate"] / fp if fp else None
-        print(f"| {r['implementation']} | {r['runs']} x {r.get('steps', 98)} | {r['rate'] / 1e3:.1f} | {ratio} |")
-    return rows
+        print(f"| {r['implementation']} | {r['runs']} x {r.get('steps', 98)} | {r['rate'] / 1e3:.3g} | {ratio} |")
 
+
+def main(quick: bool = False, bearings_only: bool = False) -> list[dict]:
+    """Measure and print a markdown table; returns the rows."""
+    runs = 100 if quick else 1000
+    loop_runs = 5 if quick else 20
+    if bearings_only:
+        rows = bearings_rows(runs, loop_runs)
+        _print(rows, None)
+        return rows
+    rows = []
+    for name in ("CS", "APCS", "MS", "IMM-Singer"):
+        rows.append({"implementation": f"pursuit {name}", "runs": runs, "rate": pursuit_rate(name, runs)})
+    rows += bearings_rows(runs, loop_runs)
+    rows.append({"implementation": "pursuit APCS, one run at a time", "runs": loop_runs, "rate": pursuit_loop_rate("APCS", loop_runs)})
+    rows.append({"implementation": "pursuit IMM-Singer, one run at a time", "runs": loop_runs, "rate": pursuit_loop_rate("IMM-Singer", loop_runs)})
+    fp = filterpy_rate(loop_runs)
+    if fp is not None:
+        rows.append({"implementation": "FilterPy IMM-Singer (one run at a time)", "runs": loop_runs, "rate": fp})
+    _print(rows, fp)
+    return rows
 
 if __name__ == "__main__":
     import sys
 
-    main(quick="--quick" in sys.argv)
+    main(quick="--quick" in sys.argv, bearings_only="--bearings" in sys.argv)

@@ -114,17 +114,22 @@ def fallback_warning(filt: object, reason: str) -> None:
     )
 
 
-def compiled_specs(motion: Any, measurement: Any, *, need_diagonal: bool, linear_motion: bool = False) -> tuple[Any, Any] | str:
+def compiled_specs(
+    motion: Any, measurement: Any, *, need_diagonal: bool, linear_motion: bool = False, step_sensor: bool = False
+) -> tuple[Any, Any] | str:
     """The compiled form of a model pair (:func:`pursuit._compiled.specs.model_specs`), or the reason there is none.
 
     Imports no numba.  ``linear_motion`` also refuses a motion model that is
-    not linear (the compiled Gaussian filters propagate with ``F``).
+    not linear (the compiled Gaussian filters propagate with ``F``);
+    ``motion=None`` asks for the measurement's spec alone (a filter with its
+    own prediction).  ``step_sensor``: the compiled path packs the sensor per
+    step, so a moving observer's is accepted.
     """
     specs_module = importlib.import_module(f"{_COMPILED_PACKAGE}.specs")
-    specs = specs_module.model_specs(motion, measurement, need_diagonal=need_diagonal)
+    specs = specs_module.model_specs(motion, measurement, need_diagonal=need_diagonal, step_sensor=step_sensor)
     if isinstance(specs, str):
         return specs
-    if linear_motion and specs[0].kind != specs_module.LINEAR:
+    if linear_motion and specs[0] is not None and specs[0].kind != specs_module.LINEAR:
         return f"motion model {type(motion).__name__} in a Gaussian filter (compiled: linear motion)"
     return specs
 

@@ -22,6 +22,7 @@ from pursuit.models import (  # noqa: E402
     ConstantVelocity,
     LinearGaussian,
     LinearMotion,
+    ObserverBearings,
     RangeBearing,
     RangeSensors,
     TimeOfArrival,
@@ -34,7 +35,10 @@ SENSORS = {
     TimeOfArrival: (TimeOfArrival([[0.0, 0.0], [100.0, 0.0]], 0.01, (0, 2), c=3.0), 4),
     RangeBearing: (RangeBearing([0.0, -50.0], 1.0, 0.02), 4),
     UNGMMeasurement: (UNGMMeasurement(r=1.0, scale=20.0), 1),
+    # a moving observer (packed per step: its position of step K_STEP), azimuth and elevation
+    ObserverBearings: (ObserverBearings([[5.0, -3.0, 1.0], [-40.0, 10.0, 30.0], [7.0, 8.0, -9.0]], [1e-3, 2e-3]), 9),
 }
+K_STEP = 2  # the step a moving sensor is packed for
 MOTIONS = {
     ConstantVelocity: ConstantVelocity(ndim=2, dt=1.0, q=0.01),
     ConstantAcceleration: ConstantAcceleration(ndim=1, dt=0.5, q=0.1),
@@ -71,42 +75,34 @@ def test_h_and_jacobian_match_the_numpy_model(cls):
     model, n = SENSORS[cls]
     spec = specs.measurement_spec(model)
     assert not isinstance(spec, str), spec
-    sensor = spec.kernel_args()
+    k = K_STEP if spec.moving else None
+    sensor = spec.kernel_args(k)
     assert isinstance(sensor, Sensor)
     X = np.random.default_rng(0).normal(20.0, 15.0, (64, n))
     out = np.full((64, model.dim), np.nan)
     _h_all(sensor, X, out)
-    np.testing.assert_allclose(out, model.h(X), rtol=1e-13, atol=0.0)
+    np.testing.assert_allclose(out, model.h(X, k), rtol=1e-13, atol=0.0)
     H = np.full((64, model.dim, n), np.nan)
     _jac_all(sensor, X, H)
-    np.testing.assert_allclose(H, np.broadcast_to(model.jacobian(X), H.shape), rtol=1e-13, atol=1e-300)
+    np.testing.assert_allclose(H, np.broadcast_to(model.jacobian(X, k), H.shape), rtol=1e-13, atol=1e-300)
 
 
-@pytest.mark.parametrize("cls", sorted(MOTIONS, key=lambda c: c.__name__), ids=lambda c: c.__name__)
-def test_propagation_matches_the_numpy_model(cls):
-    model = MOTIONS[cls]
-    spec = specs.motion_spec(model)
-    assert not isinstance(spec, str), spec
-    motion = spec.kernel_args(3, None)
-    assert isinstance(motion, Motion)
-    n = model.dim
-    X = np.random.default_rng(1).normal(0.0, 3.0, (32, n))
-    out = np.empty_like(X)
-    _propagate_all(motion, X, np.zeros(32 * motion.G.shape[1]), out)  # noise-free: the transition itself
-    np.testing.assert_allclose(out, model.f(X, 3), rtol=1e-13, atol=1e-12)
-
-
-def test_a_sensor_code_without_its_branch_gives_nan_not_another_sensors_formula():
-    from pursuit._compiled.model_math import h_point, jac_point
-
-    unknown = max(specs.M_LINEAR, specs.M_RANGE, specs.M_RANGE_BEARING, specs.M_UNGM) + 1
-    A = np.array([[0.0, 0.0], [10.0, 0.0]])
-    idx = np.array([0, 1])
-    X = np.array([[3.0, 4.0]])
-    out = np.zeros((1, 2))
-    H = np.zeros((1, 2, 2))
-    h_point(unknown, A, idx, 1.0, X, 0, out, 0)
-    jac_point(unknown, A, idx, 1.0, X, 0, H, 0)
-    assert np.isnan(out).all() and np.isnan(H).all()
-    h_point(specs.M_RANGE, A, idx, 1.0, X, 0, out, 0)  # the same arguments do reach a real branch
-    assert np.allclose(out, [[5.0, np.hypot(7.0, 4.0)]])
+def test_the_moving_observer_is_packed_per_step():
+    """Each step's sensor carries that step's observer position, 2-D and 3-D; without a step it refuses."""
+    track = np.array([[0.0, 0.0], [100.0, -50.0]])
+    spec = specs.measurement_spec(ObserverBearings(track, 1e-3, position_indices=(0, 2)))
+    assert spec.moving and spec.dim == 1
+    X = np.array([[300.0, 1.0, 400.0, 2.0]])
+    for k in (1, 2):
+        out = np.zeros((1, 1))
+        _h_all(spec.kernel_args(k), X, out)
+        np.testing.assert_allclose(out[0, 0], np.arctan2(400.0 - track[k - 1, 1], 300.0 - track[k - 1, 0]), rtol=1e-14)
+    with pytest.raises(ValueError, match="^k:"):
+        spec.kernel_args()
+    model, n = SENSORS[ObserverBearings]
+    X = np.zeros((1, n))
+    X[0, 0], X[0, 3], X[0, 6] = 5.0, -3.0, 10.0  # above the observer of step 1: the azimuth is undefined
+    H = np.full((1, 2, n), np.nan)
+    _jac_all(specs.measurement_spec(model).kernel_args(1), X, H)
+    np.testing.assert_array_equal(H, model.jacobian(X, 1))
+    assert not H.any()  # zero rows, as the NumPy model

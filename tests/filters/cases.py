@@ -204,5 +204,18 @@ if importlib.util.find_spec("numba") is not None:
         Case("cs-pf-numba", lambda s: CSPF(s.motion, s.measurement, particles=100, search=CuckooSearch(n_iter=3, trend="off"), **_NB), **_PF),
         Case("upf-l0.5-numba", lambda s: PartialUPF(s.motion, s.measurement, particles=100, fraction=0.5, **_NB), **_PF),
         Case("upf-l1-numba", lambda s: PartialUPF(s.motion, s.measurement, particles=50, fraction=1.0, **_NB), **_PF),
+        # the CS-model filter's compiled updates, with the moving observer's angles (azimuth + elevation)
+        Case(
+            "cs-nonlinear-ekf-numba",
+            lambda s: NonlinearCSFilter(s.measurement, dt=s.dt, alpha0=0.05, a_max=2.0, **_NB),
+            exact_on_linear=False,
+            scenario=BEARINGS,
+        ),
+        Case(
+            "cs-nonlinear-ukf-numba",
+            lambda s: NonlinearCSFilter(s.measurement, dt=s.dt, update="ukf", alpha0=0.05, a_max=2.0, gate=0.99, **_NB),
+            exact_on_linear=False,
+            scenario=BEARINGS,
+        ),
     ]
     NONLINEAR_CASES = [c for c in CASES if c.id != "kf" and not c.id.startswith("kf-") and c.scenario is None]

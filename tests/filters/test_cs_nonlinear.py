@@ -230,9 +230,20 @@ def test_position_indices_must_follow_the_axis_layout():
         NonlinearCSFilter(ObserverBearings(_weave(5), 1e-3, position_indices=(0, 2)))
 
 
-def test_numba_backend_warns_and_computes_with_numpy():
+def test_numba_backend_compiles_the_built_in_sensors_and_warns_for_others():
+    """ObserverBearings compiles without a warning (tests/compiled/test_cs_compiled.py checks the numbers); others warn by name."""
+    pytest.importorskip("numba")
+    import warnings
+
     from pursuit.compute import CompiledBackendWarning
 
-    with pytest.warns(CompiledBackendWarning):
-        filt = NonlinearCSFilter(ObserverBearings(_weave(5), 1e-3), backend="numba")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert NonlinearCSFilter(ObserverBearings(_weave(5), 1e-3), backend="numba").compiled
+
+    class MyBearings(ObserverBearings):  # a subclass may change h: not trusted
+        pass
+
+    with pytest.warns(CompiledBackendWarning, match="MyBearings"):
+        filt = NonlinearCSFilter(MyBearings(_weave(5), 1e-3), backend="numba")
     assert not filt.compiled

@@ -17,6 +17,10 @@ nothing keeps P⁻ itself).  A run whose
 covariance or innovation covariance does not factor (the NumPy filters
 would repair it) is flagged in ``ok`` and recomputed by the caller with
 NumPy.
+
+The measurement half of each step (:func:`_ekf_correct`, :func:`_sigma_correct`)
+is also a kernel of its own, :func:`correct_serial` / :func:`correct_parallel`,
+for a filter that forms its prediction itself (the CS-model filter).
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ import numpy as np
 from numba import njit, prange
 
 from .common import LOG_2PI, serial_and_parallel, wrap
-from .model_math import h_row, jac_row
+from .model_math import h_row, jac_row, wraps
 
 BLOCK = 512
 _NJ = dict(cache=True, error_model="numpy")
@@ -256,7 +260,7 @@ def _update_ws(pred, obs, sensor, blk, ws):
     """:func:`_update` with its scratch arrays ``ws`` from :func:`_update_workspace`."""
     xp, Pp, zp, Pzz, Pxz, L, HL, D = pred
     z, v = obs
-    R, angle = sensor.R, sensor.angle
+    R, angle, kind = sensor.R, sensor.angle, sensor.kind
     x_o, P_o, innov, S_o, nis, dof, loglik, ok = blk
     nu, S, Reff, Si, ld, Pxm, K, AL, KN, T2, q, dd = ws
     n = xp.shape[0]
@@ -265,7 +269,7 @@ def _update_ws(pred, obs, sensor, blk, ws):
     for a in range(m):
         for c in range(B):
             d = z[a, c] - zp[a, c]
-            if angle and a == 1:
+            if wraps(kind, angle, a):
                 d = wrap(d)
             meas = v[a, c] > 0.0
             innov[a, c] = d if meas else np.nan
@@ -366,6 +370,26 @@ def _store(blk, full, r0):
             f2[i, r0 + c] = b2[i, c]
 
 
+@njit(**_NJ)
+def _ekf_correct(xp, Pp, zb, vb, sensor, blk):
+    """The EKF's measurement update of one block: linearise h at the prediction ``(xp, Pp)``, then :func:`_update` into ``blk``."""
+    n, B = xp.shape
+    m = zb.shape[0]
+    zp = np.empty((m, B))
+    _h_block(sensor, xp, zp)
+    H = np.empty((m, n, B))
+    _jac_block(sensor, xp, H)
+    PHt = np.empty((n, m, B))
+    _bmmT(Pp, H, PHt)
+    Pzz = np.empty((m, m, B))
+    _bmm(H, PHt, Pzz)
+    L = np.empty((n, n, B))
+    _chol(Pp, L, blk[7])
+    HL = np.empty((m, n, B))
+    _bmm(H, L, HL)
+    _update((xp, Pp, zp, Pzz, PHt, L, HL, np.zeros((m, m, B))), (zb, vb), sensor, blk)
+
+
 def _ekf_step(state, obs, prediction, sensor, out):
     """KF / EKF step (Joseph form) on lane-major arrays; linear motion F, Q.
 
@@ -396,24 +420,12 @@ def _ekf_step(state, obs, prediction, sensor, out):
                 q = Q[i, j]
                 for c in range(B):
                     Pp[i, j, c] = (Pp[i, j, c] if lam == 1.0 else lam * Pp[i, j, c]) + q
-        zp = np.empty((m, B))
-        _h_block(sensor, xp, zp)
-        H = np.empty((m, n, B))
-        _jac_block(sensor, xp, H)
-        PHt = np.empty((n, m, B))
-        _bmmT(Pp, H, PHt)
-        Pzz = np.empty((m, m, B))
-        _bmm(H, PHt, Pzz)
         xo, Po = np.empty((n, B)), np.empty((n, n, B))
         inb, Sb = np.empty((m, B)), np.empty((m, m, B))
         nb, lb = np.empty(B), np.empty(B)
         db = np.empty(B, dtype=np.int64)
         okb = np.ones(B, dtype=np.bool_)
-        L = np.empty((n, n, B))
-        _chol(Pp, L, okb)
-        HL = np.empty((m, n, B))
-        _bmm(H, L, HL)
-        _update((xp, Pp, zp, Pzz, PHt, L, HL, np.zeros((m, m, B))), (zb, vb), sensor, (xo, Po, inb, Sb, nb, db, lb, okb))
+        _ekf_correct(xp, Pp, zb, vb, sensor, (xo, Po, inb, Sb, nb, db, lb, okb))
         _store(xo, x_out, r0)
         _store(Po, P_out, r0)
         _store(xp, xp_out, r0)
@@ -527,6 +539,83 @@ def _points(x, L, cscale, centre, chi):
                 chi[off + n + j, i, c] = x[i, c] - col
 
 
+@njit(**_NJ)
+def _sigma_correct(xp, Pp, zb, vb, sensor, sigma, blk):
+    """The UKF/CKF's measurement update of one block: points redrawn from the prediction ``(xp, Pp)``, then :func:`_update` into ``blk``."""
+    cscale, wm, wc, centre = sigma
+    angle, kind = sensor.angle, sensor.kind
+    n, B = xp.shape
+    m = zb.shape[0]
+    npts = wm.shape[0]
+    okb = blk[7]
+    L = np.empty((n, n, B))
+    chi = np.empty((npts, n, B))
+    # measurement: points redrawn from the prediction
+    _chol(Pp, L, okb)
+    _points(xp, L, cscale, centre, chi)
+    Z = np.empty((npts, m, B))
+    for s in range(npts):
+        _h_block(sensor, chi[s], Z[s])
+    zp = np.zeros((m, B))
+    for s in range(npts):
+        w = wm[s]
+        for a in range(m):
+            for c in range(B):
+                d = Z[s, a, c] - Z[0, a, c]
+                if wraps(kind, angle, a):
+                    d = wrap(d)
+                zp[a, c] += w * d
+    for a in range(m):
+        for c in range(B):
+            zp[a, c] += Z[0, a, c]
+    dZ = np.empty((npts, m, B))
+    for s in range(npts):
+        for a in range(m):
+            for c in range(B):
+                d = Z[s, a, c] - zp[a, c]
+                if wraps(kind, angle, a):
+                    d = wrap(d)
+                dZ[s, a, c] = d
+    Pzz = np.zeros((m, m, B))
+    Pxz = np.zeros((n, m, B))
+    for s in range(npts):
+        w = wc[s]
+        for a in range(m):
+            for b in range(m):
+                for c in range(B):
+                    Pzz[a, b, c] += dZ[s, a, c] * w * dZ[s, b, c]
+            for i in range(n):
+                for c in range(B):
+                    Pxz[i, a, c] += (chi[s, i, c] - xp[i, c]) * w * dZ[s, a, c]
+    # statistical linearisation, factored (as the NumPy filter): with χ = x⁻ + L ξ and the unit
+    # points ξ = ±cscale e_j, G = Σ wc ξ dZᵀ = L⁻¹ Pxz, and D = Σ wc e eᵀ with e = dZ − Gᵀ ξ
+    off = 1 if centre else 0
+    GT = np.zeros((m, n, B))  # (H L) = Gᵀ
+    for j in range(n):
+        wp = wc[off + j] * cscale
+        wn = wc[off + n + j] * cscale
+        for a in range(m):
+            for c in range(B):
+                GT[a, j, c] = wp * dZ[off + j, a, c] - wn * dZ[off + n + j, a, c]
+    E = np.empty((npts, m, B))
+    for a in range(m):
+        for c in range(B):
+            if centre:
+                E[0, a, c] = dZ[0, a, c]
+            for j in range(n):
+                g = cscale * GT[a, j, c]
+                E[off + j, a, c] = dZ[off + j, a, c] - g
+                E[off + n + j, a, c] = dZ[off + n + j, a, c] + g
+    D = np.zeros((m, m, B))
+    for s in range(npts):
+        w = wc[s]
+        for a in range(m):
+            for b in range(m):
+                for c in range(B):
+                    D[a, b, c] += E[s, a, c] * w * E[s, b, c]
+    _update((xp, Pp, zp, Pzz, Pxz, L, GT, D), (zb, vb), sensor, blk)
+
+
 def _sigma_step(state, obs, prediction, sensor, sigma, out):
     """UKF / CKF step on lane-major arrays (points x ± cscale · columns of chol P, centre first if ``centre``).
 
@@ -535,8 +624,9 @@ def _sigma_step(state, obs, prediction, sensor, sigma, out):
     x, P = state
     z, valid = obs
     F, Q, lam = prediction
-    R, angle = sensor.R, sensor.angle
-    cscale, wm, wc, centre = sigma
+    R = sensor.R
+    cscale, wm, wc = sigma.cscale, sigma.wm, sigma.wc
+    centre = sigma.centre
     x_out, P_out, xp_out, Pp_out, cross_out, innov, S_out, nis, dof, loglik, ok = out
     n, M = x.shape
     m = R.shape[0]
@@ -582,74 +672,11 @@ def _sigma_step(state, obs, prediction, sensor, sigma, out):
                 q = Q[i, j]
                 for c in range(B):
                     Pp[i, j, c] = (Pp[i, j, c] if lam == 1.0 else lam * Pp[i, j, c]) + q
-        # measurement: points redrawn from the prediction
-        _chol(Pp, L, okb)
-        _points(xp, L, cscale, centre, chi)
-        Z = np.empty((npts, m, B))
-        for s in range(npts):
-            _h_block(sensor, chi[s], Z[s])
-        zp = np.zeros((m, B))
-        for s in range(npts):
-            w = wm[s]
-            for a in range(m):
-                for c in range(B):
-                    d = Z[s, a, c] - Z[0, a, c]
-                    if angle and a == 1:
-                        d = wrap(d)
-                    zp[a, c] += w * d
-        for a in range(m):
-            for c in range(B):
-                zp[a, c] += Z[0, a, c]
-        dZ = np.empty((npts, m, B))
-        for s in range(npts):
-            for a in range(m):
-                for c in range(B):
-                    d = Z[s, a, c] - zp[a, c]
-                    if angle and a == 1:
-                        d = wrap(d)
-                    dZ[s, a, c] = d
-        Pzz = np.zeros((m, m, B))
-        Pxz = np.zeros((n, m, B))
-        for s in range(npts):
-            w = wc[s]
-            for a in range(m):
-                for b in range(m):
-                    for c in range(B):
-                        Pzz[a, b, c] += dZ[s, a, c] * w * dZ[s, b, c]
-                for i in range(n):
-                    for c in range(B):
-                        Pxz[i, a, c] += (chi[s, i, c] - xp[i, c]) * w * dZ[s, a, c]
-        # statistical linearisation, factored (as the NumPy filter): with χ = x⁻ + L ξ and the unit
-        # points ξ = ±cscale e_j, G = Σ wc ξ dZᵀ = L⁻¹ Pxz, and D = Σ wc e eᵀ with e = dZ − Gᵀ ξ
-        off = 1 if centre else 0
-        GT = np.zeros((m, n, B))  # (H L) = Gᵀ
-        for j in range(n):
-            wp = wc[off + j] * cscale
-            wn = wc[off + n + j] * cscale
-            for a in range(m):
-                for c in range(B):
-                    GT[a, j, c] = wp * dZ[off + j, a, c] - wn * dZ[off + n + j, a, c]
-        E = np.empty((npts, m, B))
-        for a in range(m):
-            for c in range(B):
-                if centre:
-                    E[0, a, c] = dZ[0, a, c]
-                for j in range(n):
-                    g = cscale * GT[a, j, c]
-                    E[off + j, a, c] = dZ[off + j, a, c] - g
-                    E[off + n + j, a, c] = dZ[off + n + j, a, c] + g
-        D = np.zeros((m, m, B))
-        for s in range(npts):
-            w = wc[s]
-            for a in range(m):
-                for b in range(m):
-                    for c in range(B):
-                        D[a, b, c] += E[s, a, c] * w * E[s, b, c]
         xo, Po = np.empty((n, B)), np.empty((n, n, B))
         inb, Sb = np.empty((m, B)), np.empty((m, m, B))
         nb, lb = np.empty(B), np.empty(B)
         db = np.empty(B, dtype=np.int64)
-        _update((xp, Pp, zp, Pzz, Pxz, L, GT, D), (zb, vb), sensor, (xo, Po, inb, Sb, nb, db, lb, okb))
+        _sigma_correct(xp, Pp, zb, vb, sensor, sigma, (xo, Po, inb, Sb, nb, db, lb, okb))
         _store(xo, x_out, r0)
         _store(Po, P_out, r0)
         _store(xp, xp_out, r0)
@@ -664,6 +691,47 @@ def _sigma_step(state, obs, prediction, sensor, sigma, out):
             ok[r0 + c] = okb[c]
 
 
+def _correct_only(prediction, obs, sensor, sigma, out):
+    """The measurement update alone, for a filter that predicts by itself (the CS-model filter).
+
+    ``prediction = (xp (n, M), Pp (n, n, M))`` lane-major, ``obs = (z, valid)``
+    ``(m, M)``, ``sigma`` a :class:`~.kernel_args.SigmaPoints` (UKF/CKF update)
+    or ``None`` (EKF update), ``out`` a :class:`~.kernel_args.GaussUpdateOutputs`.
+    The same block arithmetic as the measurement half of :func:`_ekf_step` /
+    :func:`_sigma_step`.
+    """
+    xp_all, Pp_all = prediction
+    z, valid = obs
+    x_out, P_out, innov, S_out, nis, dof, loglik, ok = out
+    n, M = xp_all.shape
+    m = sensor.R.shape[0]
+    nblocks = (M + BLOCK - 1) // BLOCK
+    for bb in prange(nblocks):
+        r0 = np.int64(bb) * BLOCK
+        B = min(r0 + BLOCK, M) - r0
+        xp, Pp, zb, vb = _load(xp_all, Pp_all, z, valid, r0, B)
+        xo, Po = np.empty((n, B)), np.empty((n, n, B))
+        inb, Sb = np.empty((m, B)), np.empty((m, m, B))
+        nb, lb = np.empty(B), np.empty(B)
+        db = np.empty(B, dtype=np.int64)
+        okb = np.ones(B, dtype=np.bool_)
+        blk = (xo, Po, inb, Sb, nb, db, lb, okb)
+        if sigma is None:
+            _ekf_correct(xp, Pp, zb, vb, sensor, blk)
+        else:
+            _sigma_correct(xp, Pp, zb, vb, sensor, sigma, blk)
+        _store(xo, x_out, r0)
+        _store(Po, P_out, r0)
+        _store(inb, innov, r0)
+        _store(Sb, S_out, r0)
+        for c in range(B):
+            nis[r0 + c] = nb[c]
+            dof[r0 + c] = db[c]
+            loglik[r0 + c] = lb[c]
+            ok[r0 + c] = okb[c]
+
+
 ekf_step_serial, ekf_step_parallel = serial_and_parallel(_ekf_step, **_NJ)
 ekf_sequence_serial, ekf_sequence_parallel = serial_and_parallel(_ekf_sequence, **_NJ)
 sigma_step_serial, sigma_step_parallel = serial_and_parallel(_sigma_step, **_NJ)
+correct_serial, correct_parallel = serial_and_parallel(_correct_only, **_NJ)

@@ -14,7 +14,7 @@ bits; other measurements run the block kernels of
 :mod:`pursuit._compiled.gauss_kernels`.
 
 The filters reach this module only through their ``compiled_path``
-(:data:`EKF`, :data:`SIGMA`, loaded by :func:`pursuit.compute.compiled_implementation`);
+(:data:`EKF`, :data:`SIGMA`, :data:`CS`, loaded by :func:`pursuit.compute.compiled_implementation`);
 it uses only the filters' public API.
 """
 
@@ -30,11 +30,11 @@ from ..filters.gaussian import GaussianState
 from ..gaussian import Gaussian
 from . import gauss_kernels as GK
 from . import generated, kf_codegen
-from .kernel_args import GaussOutputs, GaussSequenceOutputs, Prediction, SigmaPoints
+from .kernel_args import GaussOutputs, GaussSequenceOutputs, GaussUpdateOutputs, Prediction, SigmaPoints
 from .particle import measurement_args, use_parallel
 from .specs import M_LINEAR
 
-__all__ = ["gaussian_step", "gaussian_sequence", "lanes", "EKF", "SIGMA"]
+__all__ = ["gaussian_step", "gaussian_sequence", "cs_step", "lanes", "EKF", "SIGMA", "CS"]
 
 
 def lanes(a: np.ndarray, core: int) -> np.ndarray:
@@ -89,7 +89,7 @@ def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, 
         nis, loglik = np.empty(M), np.empty(M)
         dof = np.empty(M, dtype=np.int64)
         ok = np.ones(M, dtype=np.bool_)
-        args = ((x, P), (zl, valid), Prediction(F, Q, lam), measurement_args(hs))
+        args = ((x, P), (zl, valid), Prediction(F, Q, lam), hs.kernel_args(k))
         outs = GaussOutputs(x_out, P_out, xp, Pp, cross, innov, S, nis, dof, loglik, ok)
         if kind == "ekf":
             (GK.ekf_step_parallel if par else GK.ekf_step_serial)(*args, outs)
@@ -144,8 +144,8 @@ def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_co
     needed the NumPy repair at some step are recomputed step by step, alone.
     """
     ms, hs = specs
-    if len(state.batch) != 1 or filt.gate is not None:
-        return None
+    if len(state.batch) != 1 or filt.gate is not None or hs.moving:
+        return None  # a moving observer's sensor is packed per step: the step path
     F, _, _ = ms.arrays(1, None)
     Q = np.ascontiguousarray(ms.cov(1, None))
     F2, _, _ = ms.arrays(2, None)
@@ -205,3 +205,64 @@ EKF = CompiledPath(step=partial(gaussian_step, kind="ekf"), sequence=gaussian_se
 
 SIGMA = CompiledPath(step=partial(gaussian_step, kind="sigma"))
 """The compiled UKF/CKF (``UnscentedKalmanFilter.compiled_path``); no whole-sequence path."""
+
+
+def measurement_correct(filt, hs, x_pred: np.ndarray, P_pred: np.ndarray, z: np.ndarray, k: int):
+    """The compiled EKF or UKF measurement update at ``(x_pred (*b, n), P_pred (*b, n, n))``: ``(mean, cov, info)``.
+
+    The ``correct`` of :meth:`pursuit.filters.NonlinearCSFilter.numpy_step`:
+    the update kernel of the filter's ``update`` with the sensor packed for
+    step ``k``.  Runs whose covariance does not factor are recomputed with
+    the filter's NumPy :meth:`~pursuit.filters.NonlinearCSFilter.measurement_update`
+    (which repairs them), as :func:`gaussian_step` does.
+    """
+    batch = x_pred.shape[:-1]
+    M = int(np.prod(batch, dtype=int))
+    n = x_pred.shape[-1]
+    m = hs.dim
+    mean = x_pred.reshape(M, n)
+    cov = np.broadcast_to(P_pred, (*batch, n, n)).reshape(M, n, n)
+    zs = np.broadcast_to(z, (*batch, m)).reshape(M, m)
+    zl = np.ascontiguousarray(zs.T)
+    valid = ~np.isnan(zl)
+    outs = GaussUpdateOutputs(np.empty((n, M)), np.empty((n, n, M)), np.empty((m, M)), np.empty((m, m, M)), np.empty(M),
+                              np.empty(M, dtype=np.int64), np.empty(M), np.ones(M, dtype=np.bool_))
+    sigma = None
+    if filt.update != "ekf":
+        cscale, wm, wc = filt.update_filter.sigma_weights(n)
+        sigma = SigmaPoints(float(cscale), np.ascontiguousarray(wm), np.ascontiguousarray(wc), wm.shape[0] % 2 == 1)
+    kernel = GK.correct_parallel if use_parallel(M) else GK.correct_serial
+    kernel((lanes(mean, 1), lanes(cov, 2)), (zl, valid), hs.kernel_args(k), sigma, outs)
+    # C order, as the NumPy update's: the filter's NumPy prediction (einsum, matmul) then takes the same
+    # path, whose last bits depend on the layout, for a batch and for one run alone
+    new_mean, new_cov = np.ascontiguousarray(outs.x.T), np.ascontiguousarray(outs.P.transpose(2, 0, 1))
+    info = {
+        "innovation": outs.innov.T,
+        "S": outs.S.transpose(2, 0, 1),
+        "nis": outs.nis,
+        "dof": outs.dof,
+        "loglik": outs.loglik,
+        "repaired": np.zeros(M, dtype=bool),
+    }
+    if not outs.ok.all():  # the NumPy update repairs these runs' covariances
+        rows = np.flatnonzero(~outs.ok)
+        m2, c2, i2 = filt.measurement_update(mean[rows], cov[rows], zs[rows], k)
+        new_mean, new_cov = new_mean.copy(), new_cov.copy()
+        new_mean[rows], new_cov[rows] = m2, c2
+        for key in info:
+            info[key] = np.array(info[key], copy=True)
+            info[key][rows] = np.broadcast_to(i2[key], info[key][rows].shape)
+    if batch != (M,):
+        new_mean, new_cov = new_mean.reshape(batch + (n,)), new_cov.reshape(batch + (n, n))
+        info = {key: v.reshape(batch + v.shape[1:]) for key, v in info.items()}
+    return new_mean, new_cov, info
+
+
+def cs_step(filt, specs, state, z: np.ndarray, k: int, dt):
+    """One step of the CS-model filter with compiled measurement updates (its NumPy prediction and adaptation)."""
+    _, hs = specs
+    return filt.numpy_step(state, z, k, dt, correct=partial(measurement_correct, filt, hs))
+
+
+CS = CompiledPath(step=cs_step)
+"""The CS-model filter for nonlinear measurements (``NonlinearCSFilter.compiled_path``); no whole-sequence path."""

@@ -34,6 +34,7 @@ __all__ = [
     "SigmaPoints",
     "GaussOutputs",
     "GaussSequenceOutputs",
+    "GaussUpdateOutputs",
 ]
 
 
@@ -217,4 +218,17 @@ class GaussSequenceOutputs(NamedTuple):
     nis: np.ndarray  # (K, M)
     dof: np.ndarray  # (K, M) int64
     loglik: np.ndarray  # (K, M)
+    ok: np.ndarray  # (M,) bool
+
+
+class GaussUpdateOutputs(NamedTuple):
+    """What the measurement update alone writes (:func:`.gauss_kernels.correct_serial`), lane-major."""
+
+    x: np.ndarray  # (n, M)
+    P: np.ndarray  # (n, n, M)
+    innov: np.ndarray  # (m, M)
+    S: np.ndarray  # (m, m, M)
+    nis: np.ndarray  # (M,)
+    dof: np.ndarray  # (M,) int64
+    loglik: np.ndarray  # (M,)
     ok: np.ndarray  # (M,) bool

@@ -34,9 +34,10 @@ import math
 
 from numba import njit
 
-from .specs import M_LINEAR, M_RANGE, M_RANGE_BEARING, M_UNGM, UNGM  # frozen into the compiled code as constants
+# frozen into the compiled code as constants
+from .specs import M_LINEAR, M_OBSERVER_BEARINGS, M_RANGE, M_RANGE_BEARING, M_UNGM, UNGM
 
-__all__ = ["propagate_row", "propagate_point", "h_row", "h_point", "jac_row", "jac_point", "ungm_mean", "ungm_h"]
+__all__ = ["propagate_row", "propagate_point", "h_row", "h_point", "jac_row", "jac_point", "wraps", "ungm_mean", "ungm_h"]
 
 _NJ = dict(cache=True, inline="always", error_model="numpy")
 
@@ -166,6 +167,46 @@ def jac_range_bearing(A, idx, scale, X, i, H, o):
         H[o, 1, idx[1]] = dx / r2
 
 
+@njit(**_NJ)
+def h_observer_bearings(A, idx, scale, X, i, out, o):
+    """Azimuth (and elevation) from the observer's position of the step ``A[0]`` (:class:`~pursuit.models.ObserverBearings`)."""
+    dx = X[i, idx[0]] - A[0, 0]
+    dy = X[i, idx[1]] - A[0, 1]
+    out[o, 0] = math.atan2(dy, dx)
+    if idx.shape[0] == 3:
+        dz = X[i, idx[2]] - A[0, 2]
+        out[o, 1] = math.atan2(dz, math.hypot(dx, dy))
+
+
+@njit(**_NJ)
+def jac_observer_bearings(A, idx, scale, X, i, H, o):
+    """Zero rows on the observer's vertical (azimuth undefined), as the NumPy model."""
+    dx = X[i, idx[0]] - A[0, 0]
+    dy = X[i, idx[1]] - A[0, 1]
+    r2 = dx * dx + dy * dy
+    if r2 > 0:
+        H[o, 0, idx[0]] = -dy / r2
+        H[o, 0, idx[1]] = dx / r2
+        if idx.shape[0] == 3:
+            dz = X[i, idx[2]] - A[0, 2]
+            rho = math.sqrt(r2)
+            R2 = r2 + dz * dz
+            H[o, 1, idx[0]] = -dz * dx / (rho * R2)
+            H[o, 1, idx[1]] = -dz * dy / (rho * R2)
+            H[o, 1, idx[2]] = rho / R2
+
+
+@njit(**_NJ)
+def wraps(kind, angle, a):
+    """Whether innovation component ``a`` is an angle, wrapped to [−π, π) as the NumPy model's ``residual`` does.
+
+    RangeBearing's bearing (``angle`` and a = 1); every component of
+    ObserverBearings (its residual wraps the elevation too, which leaves it
+    unchanged).
+    """
+    return kind == M_OBSERVER_BEARINGS or (angle and a == 1)
+
+
 # the dispatch table: one branch per sensor code of specs.py
 @njit(**_NJ)
 def h_point(kind, A, idx, scale, X, i, out, o):
@@ -178,6 +219,8 @@ def h_point(kind, A, idx, scale, X, i, out, o):
         h_range(A, idx, scale, X, i, out, o)
     elif kind == M_RANGE_BEARING:
         h_range_bearing(A, idx, scale, X, i, out, o)
+    elif kind == M_OBSERVER_BEARINGS:
+        h_observer_bearings(A, idx, scale, X, i, out, o)
     else:  # a sensor code without its branch here: NaN, never another sensor's formula
         for a in range(out.shape[1]):
             out[o, a] = math.nan
@@ -198,6 +241,8 @@ def jac_point(kind, A, idx, scale, X, i, H, o):
         jac_range(A, idx, scale, X, i, H, o)
     elif kind == M_RANGE_BEARING:
         jac_range_bearing(A, idx, scale, X, i, H, o)
+    elif kind == M_OBSERVER_BEARINGS:
+        jac_observer_bearings(A, idx, scale, X, i, H, o)
     else:  # a sensor code without its branch here: NaN, never another sensor's Jacobian
         for a in range(m):
             for j in range(n):

@@ -14,8 +14,13 @@ Measurement
     :class:`~pursuit.models.LinearGaussian` (``H x``),
     :class:`~pursuit.models.RangeSensors` and
     :class:`~pursuit.models.TimeOfArrival` (ranges to anchors, divided by c),
-    :class:`~pursuit.models.RangeBearing` (bearing innovations wrapped) and
-    :class:`~pursuit.models.UNGMMeasurement` (``x² / s``).
+    :class:`~pursuit.models.RangeBearing` (bearing innovations wrapped),
+    :class:`~pursuit.models.UNGMMeasurement` (``x² / s``) and
+    :class:`~pursuit.models.ObserverBearings` (a moving observer's angles,
+    all wrapped): its spec is *per step* (``moving``), packed with the
+    observer's position of step k by ``kernel_args(k)``, so only the filters
+    whose compiled step packs the sensor each step take it (the Kalman
+    family and the CS-model filter; ``model_specs(..., step_sensor=True)``).
 
 Everything else (a user's model, a maneuvering-target model) is computed
 with NumPy: the ``*_spec`` functions return a reason string instead of a
@@ -39,6 +44,7 @@ import numpy as np
 from ..models.linear_motion import LinearMotion
 from ..models.measurement import LinearGaussian, RangeBearing, RangeSensors, TimeOfArrival
 from ..models.motion import ConstantAcceleration, ConstantVelocity
+from ..models.sensors import ObserverBearings
 from ..models.ungm import UNGMMeasurement, UNGMMotion
 from .kernel_args import Motion, Sensor
 
@@ -52,6 +58,7 @@ M_LINEAR = 0
 M_UNGM = 1
 M_RANGE = 2
 M_RANGE_BEARING = 3
+M_OBSERVER_BEARINGS = 4
 
 #: The motion models with a compiled form: exact type -> motion kind.
 MOTIONS: dict[type, int] = {
@@ -110,10 +117,12 @@ class MeasurementSpec:
     Attributes
     ----------
     kind
-        ``M_LINEAR``, ``M_UNGM``, ``M_RANGE`` or ``M_RANGE_BEARING``.
+        ``M_LINEAR``, ``M_UNGM``, ``M_RANGE``, ``M_RANGE_BEARING`` or
+        ``M_OBSERVER_BEARINGS``.
     A
         ``(m, n)`` H for linear; ``(s, d)`` anchors for ranges; ``(1, 2)``
-        sensor position for range-bearing; ``(1, 1)`` otherwise.
+        sensor position for range-bearing; ``(1, 1)`` otherwise (a moving
+        observer's position of the step replaces it in ``kernel_args(k)``).
     idx
         Position indices in the state (ranges, range-bearing).
     scale
@@ -123,7 +132,11 @@ class MeasurementSpec:
     diagonal
         Whether R is diagonal.
     angle
-        Whether component 1 is an angle (innovations wrapped).
+        Whether component 1 is an angle (innovations wrapped); every
+        component of ``M_OBSERVER_BEARINGS`` is (``model_math.wraps``).
+    observer
+        The moving observer's model (its ``observer_at(k)``) for a sensor
+        that depends on the step, else None.
     """
 
     kind: int
@@ -133,15 +146,26 @@ class MeasurementSpec:
     R: np.ndarray
     diagonal: bool
     angle: bool
+    observer: Any = None
 
     @property
     def dim(self) -> int:
         """Measurement dimension m."""
         return self.R.shape[0]
 
-    def kernel_args(self) -> Sensor:
-        """The spec packed for the kernels."""
-        return Sensor(self.kind, self.A, self.idx, self.scale, self.R, self.angle)
+    @property
+    def moving(self) -> bool:
+        """Whether the sensor depends on the step (a moving observer): pack it with ``kernel_args(k)``."""
+        return self.observer is not None
+
+    def kernel_args(self, k: int | None = None) -> Sensor:
+        """The spec packed for the kernels; for a moving observer, at step ``k`` (its position of that step in ``A``)."""
+        A = self.A
+        if self.observer is not None:
+            if k is None:
+                raise ValueError("k: a moving observer's sensor is packed per step")
+            A = np.asarray(self.observer.observer_at(k), dtype=float).reshape(1, -1)
+        return Sensor(self.kind, A, self.idx, self.scale, self.R, self.angle)
 
 
 def motion_spec(motion: Any) -> MotionSpec | str:
@@ -174,6 +198,12 @@ def _range_bearing_spec(h: RangeBearing, R: np.ndarray, diagonal: bool) -> Measu
     return MeasurementSpec(M_RANGE_BEARING, np.asarray(h.sensor, dtype=float).reshape(1, 2), idx, 1.0, R, diagonal, True)
 
 
+def _observer_bearings_spec(h: ObserverBearings, R: np.ndarray, diagonal: bool) -> MeasurementSpec:
+    idx = np.asarray(h.position_indices, dtype=np.int64)
+    d = idx.shape[0]
+    return MeasurementSpec(M_OBSERVER_BEARINGS, np.zeros((1, d)), idx, 1.0, R, diagonal, True, observer=h)
+
+
 def _ungm_spec(h: UNGMMeasurement, R: np.ndarray, diagonal: bool) -> MeasurementSpec:
     return MeasurementSpec(M_UNGM, np.ones((1, 1)), _NO_INDEX, float(h.scale), R, diagonal, False)
 
@@ -186,6 +216,7 @@ MEASUREMENTS: dict[type, Callable[[Any, np.ndarray, bool], MeasurementSpec]] = {
     TimeOfArrival: _ranges_spec,
     RangeBearing: _range_bearing_spec,
     UNGMMeasurement: _ungm_spec,
+    ObserverBearings: _observer_bearings_spec,
 }
 
 
@@ -200,9 +231,16 @@ def measurement_spec(measurement: Any) -> MeasurementSpec | str:
     return build(measurement, R, bool(diagonal))
 
 
-def model_specs(motion: Any, measurement: Any, need_diagonal: bool) -> tuple[MotionSpec, MeasurementSpec] | str:
-    """Both specs, or the first reason why the pair is not compiled."""
-    ms = motion_spec(motion)
+def model_specs(
+    motion: Any, measurement: Any, need_diagonal: bool, step_sensor: bool = False
+) -> tuple[MotionSpec | None, MeasurementSpec] | str:
+    """Both specs, or the first reason why the pair is not compiled.
+
+    ``motion=None``: a filter that predicts with its own model (the CS-model
+    filter) and needs only the measurement's spec.  ``step_sensor``: the
+    caller packs the sensor per step, so a moving observer is accepted.
+    """
+    ms = None if motion is None else motion_spec(motion)
     if isinstance(ms, str):
         return ms
     hs = measurement_spec(measurement)
@@ -210,4 +248,9 @@ def model_specs(motion: Any, measurement: Any, need_diagonal: bool) -> tuple[Mot
         return hs
     if need_diagonal and not hs.diagonal:
         return "a non-diagonal measurement covariance R"
+    if hs.moving and not step_sensor:
+        return (
+            f"measurement model {type(measurement).__name__} in this filter (a moving observer: compiled "
+            "in the Kalman-family and CS-model filters, which pack it per step)"
+        )
     return ms, hs

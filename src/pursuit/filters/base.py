@@ -104,6 +104,8 @@ class FilterBase:
     """Whether the compiled path needs a diagonal measurement covariance."""
     need_linear_motion: ClassVar[bool] = False
     """Whether the compiled path needs a linear motion model."""
+    compiled_step_sensor: ClassVar[bool] = False
+    """Whether the compiled path packs the measurement model per step, so a moving observer (``ObserverBearings``) compiles."""
     warn_on_default_backend: ClassVar[bool] = True
     """False for families that never compile (CS, IMM): they warn only when ``backend="numba"`` is asked explicitly."""
 
@@ -121,6 +123,16 @@ class FilterBase:
     def _compiled_unsupported(self) -> str | None:
         """Why this filter (not its models) has no compiled path; None when it has one."""
         return None if self.compiled_path else type(self).__name__
+
+    def _model_specs(self) -> Any:
+        """The compiled form of the models (:func:`pursuit.compute.compiled_specs`), or the reason there is none."""
+        return compiled_specs(
+            self.motion,
+            self.measurement,
+            need_diagonal=self.need_diagonal_noise,
+            linear_motion=self.need_linear_motion,
+            step_sensor=self.compiled_step_sensor,
+        )
 
     def _sequence_applies(self, state: Any) -> bool:
         """Whether :meth:`run_sequence` may run from ``state`` (beyond the checks of the base)."""
@@ -150,9 +162,7 @@ class FilterBase:
             return
         reason = self._compiled_unsupported()
         if reason is None:
-            specs = compiled_specs(
-                self.motion, self.measurement, need_diagonal=self.need_diagonal_noise, linear_motion=self.need_linear_motion
-            )
+            specs = self._model_specs()
             if isinstance(specs, str):
                 reason = specs
             else:

@@ -45,7 +45,15 @@ keys: the standard ones, plus ``fading`` (*b,), ``faded`` (*b,), ``alpha``
 used), ``maneuver`` (*b, A) and ``maneuver_stat`` (*b, A) (the joint flag
 and D, repeated on every axis as the maneuver experiment expects; not with
 ``adaptation="none"``, which has no detector), ``gated``, ``repaired``, ``pred_mean``, ``pred_cov``,
-``cross_cov``.  NumPy only: ``backend="numba"`` warns and computes with NumPy.
+``cross_cov``.
+
+**Compiled backend.**  With ``backend="numba"`` and a built-in measurement
+model (:class:`~pursuit.models.sensors.ObserverBearings` included) both
+measurement updates of a step, the nominal one of the residual test and the
+final one, run the compiled EKF/UKF update kernels
+(``compiled_path = "gaussian:CS"``); the CS prediction and the adaptation
+rules stay vectorised NumPy, shared with the NumPy step
+(:meth:`NonlinearCSFilter.numpy_step` with its ``correct`` argument).
 """
 
 from __future__ import annotations
@@ -56,6 +64,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import in_range, measurement_for_step, nonnegative, positive, time_step
+from ..compute import compiled_specs
 from ..gaussian import Gaussian
 from ..models.maneuver import CS_VARIANCE_FACTOR, CurrentStatistical, cs_variance
 from ..rng import RNGLike
@@ -166,7 +175,8 @@ class NonlinearCSFilter(FilterBase):
     gate: float | None = field(default=None, kw_only=True)
 
     measurement_needs = ("h", "cov")
-    warn_on_default_backend = False  # NumPy only: a process-wide numba default is not a request
+    compiled_path = "gaussian:CS"
+    compiled_step_sensor = True  # the compiled updates pack the sensor of step k (a moving observer)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "dt", positive("dt", self.dt))
@@ -201,6 +211,15 @@ class NonlinearCSFilter(FilterBase):
         nominal = CurrentStatistical(alpha=self.alpha0, a_max=self.a_max, ndim=A, dt=self.dt)
         cls = ExtendedKalmanFilter if self.update == "ekf" else UnscentedKalmanFilter
         object.__setattr__(self, "_inner", cls(nominal, self.measurement, backend="numpy"))
+
+    def _model_specs(self) -> Any:
+        # no motion model to compile: the CS prediction is this filter's own (NumPy)
+        return compiled_specs(None, self.measurement, need_diagonal=False, step_sensor=True)
+
+    @property
+    def update_filter(self) -> ExtendedKalmanFilter | UnscentedKalmanFilter:
+        """The NumPy EKF or UKF whose measurement update (and sigma points) this filter uses; its motion model is never stepped."""
+        return self._inner
 
     @property
     def detection_dof(self) -> int:
@@ -250,11 +269,26 @@ class NonlinearCSFilter(FilterBase):
         """One predict-update cycle with measurement ``z`` (``(*b, m)``; NaN = missing)."""
         k = state.k + 1 if k is None else int(k)
         dt = time_step(dt, k)
+        z = measurement_for_step(z, state.batch, self.detection_dof, k)
+        if self._specs is not None:
+            return self._compiled_step(state, z, k, dt)
+        return self.numpy_step(state, z, k, dt)
+
+    def numpy_step(
+        self, state: AxisState, z: np.ndarray, k: int, dt: float | None, correct: Any = None
+    ) -> tuple[AxisState, dict[str, np.ndarray]]:
+        """The step in NumPy (``z`` already checked), with the measurement updates by ``correct`` when given.
+
+        ``correct(x_pred, P_pred, z, k) -> (mean, cov, info)`` is the
+        measurement update at a prediction, ``info`` with the standard keys
+        and ``repaired``; default :meth:`measurement_update`.  The compiled
+        path passes its kernels; everything else is this step's.
+        """
+        correct = self.measurement_update if correct is None else correct
         T = float(self.dt if dt is None else dt)
         batch = state.batch
         R = np.asarray(self.measurement.cov(k), dtype=float)
         m = R.shape[-1]
-        z = measurement_for_step(z, batch, m, k)
         A = self.axes
         x, P = state.mean, state.cov
         xa = x.reshape(*batch, A, 3)
@@ -275,8 +309,7 @@ class NonlinearCSFilter(FilterBase):
             D = np.full(batch, np.nan)
             V = state.memory["V"]
         else:
-            meas0 = self._inner._measure(x0, P0, k)
-            _, _, info0 = _update(x0, P0, z, valid, meas0, self.measurement, k)
+            _, _, info0 = correct(x0, P0, z, k)
             nu = np.where(valid, info0["innovation"], 0.0)
             # D = νᵀ S0⁻¹ ν, solved per run: the shared update's NIS (a batched quadratic form) may
             # differ in the last bit with the batch size, and D decides the adaptation.
@@ -315,8 +348,7 @@ class NonlinearCSFilter(FilterBase):
         Q = _full((2.0 * alpha[..., None] * sigma2)[..., None, None] * q[..., None, :, :], A)
         P_pred = lam[..., None, None] * FPFt + Q
         P_pred = 0.5 * (P_pred + _t(P_pred))
-        meas = self._inner._measure(x_pred, P_pred, k)
-        mean, cov, info = _update(x_pred, P_pred, z, valid, meas, self.measurement, k)
+        mean, cov, info = correct(x_pred, P_pred, z, k)
         gated = np.zeros(batch, dtype=bool)
         if self.gate is not None:
             mean, cov, gated = apply_gate(self.gate, info, x_pred, P_pred, mean, cov)
@@ -337,11 +369,21 @@ class NonlinearCSFilter(FilterBase):
             info["maneuver"] = np.broadcast_to(detect[..., None], (*batch, A))
             info["maneuver_stat"] = np.broadcast_to(D[..., None], (*batch, A))
         info["gated"] = gated
-        info["repaired"] = np.zeros(batch, dtype=bool) | np.broadcast_to(meas.repaired if meas.repaired is not None else False, batch)
+        info["repaired"] = np.zeros(batch, dtype=bool) | np.broadcast_to(info["repaired"], batch)
         info["pred_mean"] = x_pred
         info["pred_cov"] = P_pred
         info["cross_cov"] = P @ _t(Ff)
         return AxisState(mean, np.broadcast_to(cov, (*batch, *cov.shape[-2:])).copy(), k, memory), info
+
+    def measurement_update(
+        self, x_pred: np.ndarray, P_pred: np.ndarray, z: np.ndarray, k: int
+    ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        """The EKF or UKF update at the prediction ``(x_pred, P_pred)`` in NumPy: ``(mean, cov, info)``, info with ``repaired``."""
+        meas = self._inner._measure(x_pred, P_pred, k)
+        mean, cov, info = _update(x_pred, P_pred, z, ~np.isnan(z), meas, self.measurement, k)
+        info = dict(info)
+        info["repaired"] = np.broadcast_to(meas.repaired if meas.repaired is not None else False, x_pred.shape[:-1])
+        return mean, cov, info
 
     # -- pieces ---------------------------------------------------------------
     def _clip(self, s2: np.ndarray) -> np.ndarray:

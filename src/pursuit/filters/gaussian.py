@@ -237,6 +237,7 @@ class _GaussianFilter(FilterBase):
     motion_needs = ("f", "cov")
     measurement_needs = ("h", "cov")
     need_linear_motion = True  # the compiled Gaussian filters propagate with F
+    compiled_step_sensor = True  # the compiled step packs the sensor of step k (a moving observer)
 
     def __post_init__(self) -> None:
         if self.gate is not None:
