@@ -81,7 +81,7 @@ MUTATIONS: list[tuple[tuple, Any, str]] = [
 _GATED = ("kf", "ekf", "ukf", "ckf", "cs", "apcs", "ms", "cs-nonlinear", "singer", "imm", "imm-singer")
 _PARTICLE = ("pf", "upf", "cs-pf", "ics-pf")
 # Columns that measure the machine, not the filters.
-_TIMING = ("time", "wall", "cost", "speed", "per_step_s", "seconds")
+_TIMING = ("time", "wall", "cost", "speed", "per_step_s", "per_s", "seconds")  # per_s: scans_per_s
 _CHECKED = ("rmse", "nees", "nis", "anees", "anis")
 
 
