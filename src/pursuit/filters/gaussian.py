@@ -226,6 +226,69 @@ class _Measured:
 
 
 @dataclass(frozen=True)
+class UpdateMoments:
+    """The part of one Gaussian update that does not depend on the measurement, for a batch of tracks.
+
+    For a filter whose update depends on ``z`` only through the innovation
+    ν = residual(z, ẑ) (no gate, a constant fading factor), the prediction,
+    ẑ, S, the gain K and the updated covariance are the same for every
+    measurement a track may be updated with; :meth:`update` then applies
+    one innovation per (track, measurement) pair.  Made by
+    :meth:`_GaussianFilter.update_moments`; the multi-target trackers use it
+    to update every track with every detection of a scan.
+
+    Attributes
+    ----------
+    pred_mean, pred_cov
+        ``(*b, n)`` and ``(n, n)`` or ``(*b, n, n)``: the prediction, its
+        covariance symmetrised (the state of a step without a measurement).
+    zp
+        ``(*b, m)`` predicted measurement.
+    K, S_inv, logdet
+        Gain ``(.., n, m)``, S⁻¹ ``(.., m, m)`` and log det S ``(..)``, each
+        either one for the whole batch (shared covariance) or one per track.
+    cov
+        Updated covariance, ``(n, n)`` or ``(*b, n, n)``, symmetrised.
+    measurement
+        The measurement model (its ``residual`` wraps angles).
+    """
+
+    pred_mean: np.ndarray
+    pred_cov: np.ndarray
+    zp: np.ndarray
+    K: np.ndarray
+    S_inv: np.ndarray
+    logdet: np.ndarray
+    cov: np.ndarray
+    measurement: Any
+
+    def update(self, z: np.ndarray, index: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Mean, NIS and log-likelihood of updating track ``index`` with ``z``.
+
+        ``z (P, m)`` holds complete measurements (no NaN); ``index`` selects
+        ``P`` tracks from the batch axes (an integer array for one batch
+        axis, a tuple of them for more), repeats allowed.  Equals
+        ``step`` with ``z`` on those tracks, to round-off.
+        """
+        def take(a: np.ndarray, core: int) -> np.ndarray:
+            return a if a.ndim == core else a[index]  # shared: one for all, broadcast below
+
+        m = self.zp.shape[-1]
+        nu = _residual(self.measurement, z, self.zp[index])
+        mean = self.pred_mean[index] + mv(take(self.K, 2), nu)
+        nis = quad(nu, take(self.S_inv, 2))
+        loglik = -0.5 * (nis + take(self.logdet, 0) + m * _LOG_2PI)
+        return mean, nis, loglik
+
+    def covariance(self, index: Any, count: int) -> np.ndarray:
+        """``(count, n, n)`` updated covariance of the tracks ``index``: a read-only broadcast view when shared."""
+        n = self.cov.shape[-1]
+        if self.cov.ndim == 2:
+            return np.broadcast_to(self.cov, (count, n, n))
+        return self.cov[index]
+
+
+@dataclass(frozen=True)
 class _GaussianFilter(FilterBase):
     """Shared predict-fade-update cycle; subclasses give the two transforms."""
 
@@ -345,6 +408,33 @@ class _GaussianFilter(FilterBase):
             info["gated"] = np.asarray(fade.info["gated"], dtype=bool) | gated
         return GaussianState(mean=mean, cov=cov, k=k, memory=memory), info
 
+    def update_moments(self, state: GaussianState, k: int, dt: float | None = None) -> UpdateMoments | None:
+        """Predict and compute everything of the update that does not depend on the measurement.
+
+        Returns None where the update depends on the measurement beyond its
+        innovation: a ``gate``, a fading strategy other than a constant
+        factor (adaptive strategies read z), or a subclass with a ``step``
+        of its own.  The hooks are the NumPy step's, whatever the backend.
+
+        Parameters
+        ----------
+        state
+            State after step ``k − 1``, any batch.
+        k, dt
+            Step index and time since the previous step (None: the model's own).
+        """
+        own = type(self).step is _GaussianFilter.step and type(self).numpy_step is _GaussianFilter.numpy_step
+        if self.gate is not None or type(self.fading) is not Constant or not own:
+            return None
+        k = int(k)
+        dt = time_step(dt, k)
+        pred = self._predict(state.mean, _core(state.cov), k, dt)
+        P_pred = _scale(np.asarray(self.fading.lam, dtype=float), pred.propagated) + pred.Q
+        meas = self._measure(pred.mean, P_pred, k)
+        R = np.asarray(self.measurement.cov(k), dtype=float)
+        S, S_inv, K, cov = _gain_and_cov(P_pred, meas, R, R, meas.Pzz, meas.Pxz, meas.H, meas.D)
+        return UpdateMoments(pred.mean, symmetrize(P_pred), meas.zp, K, S_inv, logdet_spd(S), symmetrize(cov), self.measurement)
+
     # -- hooks --------------------------------------------------------------
     def _predict(self, x: np.ndarray, P: np.ndarray, k: int, dt: float | None) -> _Prediction:
         raise NotImplementedError
@@ -405,23 +495,8 @@ def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k):
             D = np.where(vv, D, 0.0)
         dof = np.broadcast_to(valid.sum(axis=-1), batch)
 
-    S = symmetrize(Pzz + R_eff)
-    S_inv = inv_spd(S)
-    K = Pxz @ S_inv
+    S, S_inv, K, cov = _gain_and_cov(P_pred, meas, R, R_eff, Pzz, Pxz, H, D)
     mean = x_pred + mv(K, nu)
-    if meas.L is not None:
-        # Sigma points: the Joseph form through the points' factor, (I − K H) L = L − K Gᵀ, so
-        # neither H = Gᵀ L⁻¹ nor a product with P⁻ is formed.  With L ill-conditioned (a long gap
-        # makes P⁻ nearly singular) the solve for H and the products A P⁻ Aᵀ lost positive
-        # definiteness to round-off; a Gram matrix A_L A_Lᵀ cannot.
-        AL = meas.L - K @ _t(meas.G)
-        cov = _joseph_gram(AL, K, R, meas.E)
-        if cov is None:
-            cov = AL @ _t(AL) + K @ (R_eff + D) @ _t(K)
-    else:  # KF/EKF: every _Measured carries H or the points' factor L
-        n = x_pred.shape[-1]
-        A = np.eye(n) - K @ H
-        cov = _sandwich(A, P_pred) + K @ R_eff @ _t(K)
     measured = dof > 0
     if not np.all(measured):
         # nothing measured: the prediction itself, not its factor's reconstruction L Lᵀ
@@ -441,6 +516,27 @@ def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k):
         "loglik": np.broadcast_to(loglik, batch),
     }
     return mean, cov, info
+
+
+def _gain_and_cov(P_pred, meas: _Measured, R, R_eff, Pzz, Pxz, H, D):
+    """S, S⁻¹, the gain K and the Joseph-form covariance (not yet symmetrised): the part of the update that ignores z."""
+    S = symmetrize(Pzz + R_eff)
+    S_inv = inv_spd(S)
+    K = Pxz @ S_inv
+    if meas.L is not None:
+        # Sigma points: the Joseph form through the points' factor, (I − K H) L = L − K Gᵀ, so
+        # neither H = Gᵀ L⁻¹ nor a product with P⁻ is formed.  With L ill-conditioned (a long gap
+        # makes P⁻ nearly singular) the solve for H and the products A P⁻ Aᵀ lost positive
+        # definiteness to round-off; a Gram matrix A_L A_Lᵀ cannot.
+        AL = meas.L - K @ _t(meas.G)
+        cov = _joseph_gram(AL, K, R, meas.E)
+        if cov is None:
+            cov = AL @ _t(AL) + K @ (R_eff + D) @ _t(K)
+    else:  # KF/EKF: every _Measured carries H or the points' factor L
+        n = P_pred.shape[-1]
+        A = np.eye(n) - K @ H
+        cov = _sandwich(A, P_pred) + K @ R_eff @ _t(K)
+    return S, S_inv, K, cov
 
 
 def _joseph_gram(AL: np.ndarray, K: np.ndarray, R: np.ndarray, E: np.ndarray | None) -> np.ndarray | None:

@@ -7,6 +7,13 @@ track's state repeated for each detection) and one call with all-NaN
 measurements (the missed-detection hypothesis, predict only).  So any
 pursuit filter (KF, EKF, UKF, CKF, IMM) gives the NIS, the log-likelihood
 and each hypothesis's posterior without a line of filter-specific code here.
+A Gaussian filter whose update reads the detection only through its
+innovation (no gate, a constant fading factor) offers ``update_moments``:
+the prediction, S, the gain and the updated covariance once per track, and
+per pair only the innovation (the model's residual, so angles wrap), the
+mean, NIS and log-likelihood; the pairs of a track share its covariance.
+The result equals the per-pair step to round-off
+(``tests/multitarget/test_association_shared.py``).
 
 The association weight of a pair is the likelihood ratio of "detection r
 comes from track t" against "track t was missed and r is clutter"
@@ -37,6 +44,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ..filters.gating import chi2_gate_thresholds
+from ..filters.gaussian import GaussianState, UpdateMoments
 
 __all__ = [
     "Hypotheses",
@@ -163,13 +171,18 @@ class Hypotheses:
 def evaluate_hypotheses(
     filt: Any, state: Any, z: np.ndarray, alive: np.ndarray, gate: float, k: int, dt: float | None = None
 ) -> Hypotheses:
-    """Evaluate all hypotheses of one scan with two calls of ``filt.step``.
+    """Evaluate all hypotheses of one scan with two calls of ``filt.step``, or one prediction per track.
 
     The pairs of an alive track and a real detection are gathered into one
     flat batch ``(P,)`` (free slots and padding rows are skipped: with a
     capacity well above the number of tracks most of ``(M, L, D)`` is
     empty) and stepped once; the missed hypothesis is one step of the alive
-    tracks with NaN measurements (a free slot keeps its state).
+    tracks with NaN measurements (a free slot keeps its state).  Where the
+    filter's ``update_moments`` applies (a Gaussian filter without gate or
+    adaptive fading) the alive tracks are predicted once instead, the missed
+    hypothesis is that prediction, and each pair costs one innovation; the
+    pair states then share their track's covariance (a read-only broadcast
+    view where all tracks share one).
 
     Parameters
     ----------
@@ -188,7 +201,6 @@ def evaluate_hypotheses(
     """
     M, D, m = z.shape
     L = alive.shape[1]
-    missed = _predict_alive(filt, state, alive, m, k, dt)
     detected = ~np.isnan(z).any(axis=-1)
     runs, tracks, dets = np.nonzero(alive[:, :, None] & detected[:, None, :])
     P = runs.size
@@ -198,15 +210,61 @@ def evaluate_hypotheses(
     pair = np.full((M, L, D), -1, dtype=np.int64)
     pair[runs, tracks, dets] = np.arange(P)
     states = None
-    if P:
-        states, info = filt.step(gather_state(state, runs, tracks), z[runs, dets], k=k, dt=dt)
-        nis[runs, tracks, dets] = np.broadcast_to(info["nis"], (P,))
-        # An IMM's exact likelihood is the mixture's, log Σ_j c̄_j Λ_j (its "loglik" is of the moment-matched Gaussian).
-        loglik[runs, tracks, dets] = np.broadcast_to(info.get("loglik_mixture", info["loglik"]), (P,))
-        dof[runs, tracks, dets] = np.broadcast_to(info["dof"], (P,))
+    fast = _shared_moments(filt, state, alive, m, k, dt)
+    if fast is not None:
+        # A Gaussian filter whose update sees z only through the innovation: predict and form S, K and
+        # the updated covariance once per track, then per pair only the innovation, mean, NIS and loglik.
+        moments, missed, where = fast
+        if P:
+            index = (runs, tracks) if where is None else where[runs, tracks]
+            mean, nis[runs, tracks, dets], loglik[runs, tracks, dets] = moments.update(z[runs, dets], index)
+            states = GaussianState(mean=mean, cov=moments.covariance(index, P), k=missed.k, memory=None)
+            dof[runs, tracks, dets] = m
+    else:
+        missed = _predict_alive(filt, state, alive, m, k, dt)
+        if P:
+            states, info = filt.step(gather_state(state, runs, tracks), z[runs, dets], k=k, dt=dt)
+            nis[runs, tracks, dets] = np.broadcast_to(info["nis"], (P,))
+            # An IMM's exact likelihood is the mixture's, log Σ_j c̄_j Λ_j (its "loglik" is of the moment-matched Gaussian).
+            loglik[runs, tracks, dets] = np.broadcast_to(info.get("loglik_mixture", info["loglik"]), (P,))
+            dof[runs, tracks, dets] = np.broadcast_to(info["dof"], (P,))
     within = nis <= chi2_gate_thresholds(gate, m)[dof]  # NaN NIS (no pair) compares False
     gated = within & detected[:, None, :] & alive[:, :, None]
     return Hypotheses(missed, states, pair, runs, tracks, dets, nis, loglik, detected, gated)
+
+
+def _shared_moments(
+    filt: Any, state: Any, alive: np.ndarray, m: int, k: int, dt: float | None
+) -> tuple[UpdateMoments, GaussianState, np.ndarray | None] | None:
+    """The fast path of :func:`evaluate_hypotheses`, or None where it does not apply.
+
+    Returns the alive tracks' :class:`UpdateMoments`, the missed hypothesis
+    (the prediction; a free slot keeps its state) and the ``(M, L)`` position
+    of each track in the moments' flat batch (None: the moments have batch
+    ``(M, L)``, every slot alive).  None for a filter that is not a plain
+    Gaussian one (IMM, CS filters, a gate, adaptive fading), when no track
+    is alive, or when ``m`` is not the filter's (its ``step`` says why).
+    """
+    update_moments = getattr(filt, "update_moments", None)  # the Gaussian filters (KF, EKF, UKF, CKF) have it
+    if update_moments is None or not isinstance(state, GaussianState) or not alive.any():
+        return None
+    everywhere = bool(alive.all())
+    if everywhere:
+        part, where = state, None
+    else:
+        runs, tracks = np.nonzero(alive)
+        part = gather_state(state, runs, tracks)
+        where = np.full(alive.shape, -1, dtype=np.int64)
+        where[runs, tracks] = np.arange(runs.size)
+    moments = update_moments(part, k, dt)
+    if moments is None or moments.zp.shape[-1] != m:
+        return None
+    batch, n = part.mean.shape[:-1], part.mean.shape[-1]
+    predicted = GaussianState(mean=moments.pred_mean, cov=np.broadcast_to(moments.pred_cov, (*batch, n, n)), k=int(k), memory=None)
+    if everywhere:
+        return moments, predicted, None
+    missed = dataclasses.replace(scatter_state(predicted, state, runs, tracks), k=int(k))
+    return moments, missed, where
 
 
 def _predict_alive(filt: Any, state: Any, alive: np.ndarray, m: int, k: int, dt: float | None) -> Any:
