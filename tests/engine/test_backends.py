@@ -211,28 +211,39 @@ def test_interrupt_stops_the_workers_without_waiting_for_their_chunks(tmp_path):
 
 def test_a_signal_while_a_worker_starts_stops_that_worker_too(monkeypatch):
     """A signal between a worker's start and its entry in the pool's table (a flaky CLI test caught it):
-    the unlisted worker is stopped too, else exiting would join it for ever (multiprocessing's atexit)."""
+    the unlisted worker is stopped too, else exiting would join it for ever (multiprocessing's atexit);
+    a process of the user's, started while the pool lives, is left alone."""
     import multiprocessing
     import time
     from concurrent.futures.process import ProcessPoolExecutor
 
     before = {p.pid for p in multiprocessing.active_children()}
     spawn = ProcessPoolExecutor._spawn_process
+    users = multiprocessing.get_context("spawn").Process(target=time.sleep, args=(60,))
 
     def spawn_then_signal(pool):
         if not pool._processes:
-            return spawn(pool)
-        proc = pool._mp_context.Process(target=time.sleep, args=(60,))
-        proc.start()  # started, then "the signal": never entered in pool._processes
+            spawn(pool)
+            users.start()  # the user's own process, started while the pool lives
+            return
+        table, pool._processes = pool._processes, {}
+        try:
+            spawn(pool)  # the real start, entered in a throwaway table: unlisted, as after the signal
+        finally:
+            pool._processes = table
         raise KeyboardInterrupt
 
     monkeypatch.setattr(ProcessPoolExecutor, "_spawn_process", spawn_then_signal)
     started = time.monotonic()
-    with pytest.raises(KeyboardInterrupt):
-        with LocalProcesses(2) as backend:
-            backend.map_chunks(_worker_thread_env, [(0, 1), (1, 2)], lambda span, result: None)
-    assert time.monotonic() - started < 30
-    assert {p.pid for p in multiprocessing.active_children()} - before == set()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with LocalProcesses(2) as backend:
+                backend.map_chunks(_worker_thread_env, [(0, 1), (1, 2)], lambda span, result: None)
+        assert time.monotonic() - started < 30
+        assert {p.pid for p in multiprocessing.active_children()} - before == {users.pid}
+    finally:
+        users.terminate()
+        users.join(10)
 
 
 def test_workers_that_keep_dying_end_in_worker_lost(tmp_path):

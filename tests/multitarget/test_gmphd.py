@@ -208,6 +208,40 @@ def test_prune_merge_two_dimensional_matches_moments():
     assert out_l[0, 0] == int(np.argmax(w))
 
 
+def _merge_reference(w, mean, cov, threshold, merge):
+    """Vo & Ma's pruning and merging written out directly, one run: (weights, means) heaviest first."""
+    idx = [i for i in np.argsort(-w, kind="stable") if w[i] > threshold]
+    out = []
+    while idx:
+        j = idx[0]
+        group = [i for i in idx if (mean[i] - mean[j]) @ np.linalg.solve(cov[i], mean[i] - mean[j]) <= merge]
+        W = w[group].sum()
+        out.append((W, (w[group, None] * mean[group]).sum(0) / W))
+        idx = [i for i in idx if i not in group]
+    out.sort(key=lambda t: -t[0])
+    return np.array([t[0] for t in out]), np.array([t[1] for t in out])
+
+
+@pytest.mark.parametrize("scale", [1e2, 1e6, 1e8])
+def test_prune_merge_equals_the_direct_formula_far_from_the_origin(scale):
+    """The merge distances come from an expansion that cancels when |m| ≫ the spread (a review found
+    components lost at |m|/σ ≈ 1e8): near the threshold they are computed again directly."""
+    rng = np.random.default_rng(11)
+    runs, C, n = 20, 8, 4
+    centre = rng.uniform(1.0, 2.0, (runs, 1, n)) * scale
+    mean = centre + rng.normal(0.0, 1.0, (runs, C, n)) * rng.choice([0.01, 3.0, 1e3], (runs, C, 1))
+    cov = np.broadcast_to(np.eye(n) * 1e-4, (runs, C, n, n)).copy()
+    cov[:, ::2] *= 1e4
+    w = rng.uniform(0.05, 1.0, (runs, C))
+    label = np.broadcast_to(np.arange(C), (runs, C))
+    out_w, out_m, _, _ = prune_merge(w, mean, cov, label, 1e-5, 4.0, 100)
+    for r in range(runs):
+        ref_w, ref_m = _merge_reference(w[r], mean[r], cov[r], 1e-5, 4.0)
+        got = out_w[r] > 0
+        np.testing.assert_allclose(out_w[r, got], ref_w, rtol=1e-12)
+        np.testing.assert_allclose(out_m[r, got], ref_m, rtol=1e-12, atol=1e-9 * scale)
+
+
 def test_extract_estimates_by_hand():
     w = np.array([[1.6, 0.5, 0.49, 2.2], [0.0, 0.0, 0.0, 0.0]])
     mean = np.arange(8.0).reshape(2, 4, 1)

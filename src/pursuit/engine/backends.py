@@ -176,6 +176,34 @@ def _worker_init() -> None:
 _TERMINATE_GRACE_S = 2.0
 
 
+class _RecordingContext:
+    """A multiprocessing context that remembers every process it makes, before it starts.
+
+    ``concurrent.futures`` starts a worker and only then enters it in its
+    table; a signal in between leaves a running child that the table misses,
+    and exiting would wait for it for ever (multiprocessing joins its
+    children).  The pool makes its workers through this context, so they
+    are all known, and no other child of this process (another pool's, the
+    user's) is ever taken for one.
+    """
+
+    def __init__(self, ctx: multiprocessing.context.BaseContext):
+        self._ctx = ctx
+        self.made: list = []
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._ctx, name)
+
+    def Process(self, *args: Any, **kwargs: Any) -> Any:  # noqa: N802 - the context's own name
+        proc = self._ctx.Process(*args, **kwargs)
+        self.made.append(proc)
+        return proc
+
+    def started(self) -> list:
+        """The processes made here that were started (a pid) and are not yet reaped."""
+        return [p for p in self.made if p.pid is not None and p.exitcode is None]
+
+
 class LocalProcesses:
     """Chunks across ``workers`` local processes.
 
@@ -208,15 +236,13 @@ class LocalProcesses:
         self.max_restarts = int(max_restarts)
         self.restarts = 0
         self._pool: ProcessPoolExecutor | None = None
-        self._children_before: set[int] = set()
+        self._context: _RecordingContext | None = None
 
     def _executor(self) -> ProcessPoolExecutor:
         if self._pool is None:
-            # Remembered so that terminate() also finds a worker whose start a signal interrupted: it is
-            # this process's child but not yet in the pool's table, and exiting would wait for it.
-            self._children_before = {p.pid for p in multiprocessing.active_children()}
+            self._context = _RecordingContext(_mp_context())
             self._pool = ProcessPoolExecutor(
-                max_workers=self.workers, mp_context=_mp_context(), initializer=_worker_init
+                max_workers=self.workers, mp_context=self._context, initializer=_worker_init
             )
         return self._pool
 
@@ -234,11 +260,8 @@ class LocalProcesses:
         pool, self._pool = self._pool, None
         if pool is None:
             return
-        procs = list((getattr(pool, "_processes", None) or {}).values())  # no public handle before Python 3.14
-        known = {p.pid for p in procs}
-        procs += [
-            p for p in multiprocessing.active_children() if p.pid not in known and p.pid not in self._children_before
-        ]
+        # Every worker the pool made, listed in its table or not (a signal between a start and the listing)
+        procs = self._context.started() if self._context is not None else []
         for proc in procs:
             proc.terminate()
         for proc in procs:

@@ -462,6 +462,11 @@ def prune_merge(
     A = 0.5 * (inv + np.swapaxes(inv, -1, -2))
     a = np.einsum("mcij,mcj->mci", A, mean)
     c = np.einsum("mci,mci->mc", a, mean)
+    # The expansion cancels when |m| is large against the spread: its rounding error is at most about
+    # (n² + 2)·eps·‖A_i‖_F·(‖m_i‖ + ‖m_j‖)², so a distance that close to U is computed again directly.
+    a_norm = np.sqrt(np.einsum("mcij,mcij->mc", A, A))
+    m_norm = np.sqrt(np.einsum("mci,mci->mc", mean, mean))
+    rel_err = 4.0 * (n * n + 2) * np.finfo(float).eps
     A = A.reshape(M, -1, n * n)
 
     out_w = np.zeros((M, width))
@@ -479,13 +484,20 @@ def prune_merge(
             w, remaining, label = (np.take_along_axis(a, keep, axis=1) for a in (w, remaining, label))
             mean, a, A = (np.take_along_axis(x, keep[..., None], axis=1) for x in (mean, a, A))
             cov = np.take_along_axis(cov, keep[..., None, None], axis=1)
-            c = np.take_along_axis(c, keep, axis=1)
+            c, a_norm, m_norm = (np.take_along_axis(x, keep, axis=1) for x in (c, a_norm, m_norm))
         active = left > 0
         j = np.argmax(np.where(remaining, w, -np.inf), axis=1)  # the heaviest remaining (first of equals)
         mj = mean[ar, j]  # (M, n)
         outer = (mj[:, :, None] * mj[:, None, :]).reshape(M, 1, n * n)
         d2 = c - 2.0 * np.sum(a * mj[:, None, :], axis=-1) + np.sum(A * outer, axis=-1)
+        bound = rel_err * a_norm * (m_norm + m_norm[ar, j][:, None]) ** 2
+        near = remaining & (np.abs(d2 - merge) <= bound)
+        if near.any():  # rare: coordinates far larger than the spread
+            runs, cols = np.nonzero(near)
+            diff = mean[runs, cols] - mj[runs]
+            d2[runs, cols] = np.einsum("ki,kij,kj->k", diff, A[runs, cols].reshape(-1, n, n), diff)
         group = remaining & (d2 <= merge)
+        group[ar, j] |= active  # j itself, at distance 0 whatever the rounding
         gw = np.where(group, w, 0.0)
         total = gw.sum(axis=1)
         safe = np.where(active, total, 1.0)
