@@ -145,6 +145,19 @@ def test_claim_verdict_flips_when_the_judged_scans_do():
     assert [r[1] for r in t.rows] == ["1-6", "7-12", "1-6"]
 
 
+def test_a_run_with_zero_gospa_in_the_window_is_left_out_and_counted():
+    """No target and no false track over the judged scans: GOSPA 0, no ratio; the table says so, no warning."""
+    g = _gospa_pair(0.8)
+    g["B"] = g["B"].copy()
+    g["B"][:, 3] = 0.0
+    t = claims_table([_claim()], g)
+    row = dict(zip(t.columns, t.rows[0]))
+    assert row["runs"] == 29 and row["verdict"] == "holds"
+    keep = np.arange(30) != 3
+    m, _, _ = log_ratio_interval(g["B"].mean(axis=0)[keep], g["T"].mean(axis=0)[keep])
+    assert row["ratio"] == pytest.approx(np.exp(m), rel=1e-12)
+
+
 CLAIMED = """
 [experiment]
 kind = "multitarget"

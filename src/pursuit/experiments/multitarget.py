@@ -172,20 +172,24 @@ def claims_table(claims: list[dict[str, Any]], gospa_total: dict[str, np.ndarray
             raise ValueError(f"claim.scans: the scenario has {K} scans, got last = {last}")
         rb = gospa_total[c["baseline"]][first - 1 : last].mean(axis=0)
         rf = gospa_total[c["tracker"]][first - 1 : last].mean(axis=0)
-        m, lo, hi = log_ratio_interval(rb, rf)
+        # A run with a GOSPA of exactly 0 over the window (no target, no false track) has no ratio: it is
+        # left out of the interval, and the runs column says how many runs the verdict rests on.
+        ratio_defined = (rb > 0) & (rf > 0)
+        m, lo, hi = log_ratio_interval(rb[ratio_defined], rf[ratio_defined])
         rows.append([
             c["text"] or f"{c['tracker']} has a smaller GOSPA than {c['baseline']}",
             f"{first}-{last}", c["baseline"], c["tracker"],
             float(np.median(rb)), float(np.median(rf)), float(np.exp(m)), float(np.exp(lo)), float(np.exp(hi)),
-            ratio_verdict(lo, hi),
+            int(ratio_defined.sum()), ratio_verdict(lo, hi),
         ])  # fmt: skip
     return Table(
         "claims",
         "Claims judged from the measured runs (paired over runs, common random numbers)",
-        ["claim", "scans", "baseline", "tracker", "baseline_median_gospa", "tracker_median_gospa", "ratio", "ratio_lo95", "ratio_hi95", "verdict"],
+        ["claim", "scans", "baseline", "tracker", "baseline_median_gospa", "tracker_median_gospa", "ratio", "ratio_lo95", "ratio_hi95", "runs", "verdict"],
         rows,
         notes="ratio: geometric mean over runs of GOSPA_tracker / GOSPA_baseline (each run's mean GOSPA over the judged scans), "
-        "with its 95 % paired t-interval; holds: the whole interval below 1; reversed: above 1.",
+        "with its 95 % paired t-interval; holds: the whole interval below 1; reversed: above 1. runs: the runs it rests on "
+        "(a run whose GOSPA over the judged scans is exactly 0 for either tracker has no ratio and is left out).",
         kind="paper",
     )
 
