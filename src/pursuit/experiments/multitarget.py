@@ -29,7 +29,6 @@ from typing import Any
 import numpy as np
 
 from .. import registry
-from .maneuver import log_ratio_interval, ratio_verdict
 from ..config.build import build_scenario, resolve_section
 from ..multitarget.metrics import gospa, gospa_summary, track_counts, track_switches
 from ..multitarget.tracking import MultiTrackResult
@@ -38,6 +37,7 @@ from ..report.mt_figures import gospa_over_time, scene
 from ..rng import run_streams
 from ..scenarios.multitarget import MultiTargetScenario
 from ..tables import ExperimentOutput, Table
+from .maneuver import log_ratio_interval, ratio_verdict
 from .montecarlo import check_run_exists, run_index
 
 __all__ = ["MultiTargetPlan", "TrackerScore", "score", "claims_table"]
@@ -68,6 +68,8 @@ METRIC_PARAMS = (
     Param("p", "float", 2.0, "GOSPA order p >= 1", check=_order),
     Param("alpha", "float", 2.0, "GOSPA alpha in (0, 2]; 2 gives the localisation / missed / false parts", check=_alpha),
 )
+
+
 def _scan_range(field_name: str, v: Any) -> list[int]:
     if len(v) not in (0, 2) or any(float(x) != int(x) or x < 1 for x in v):
         raise ValueError(f"{field_name}: expected [first, last], two scan numbers >= 1 (or [] for all scans), got {list(v)!r}")
