@@ -80,6 +80,19 @@ def resolve_section(sections: dict[str, Any], name: str, params: tuple[Param, ..
     return registry.Component("section", name, "", params, dict).resolve(table, name)
 
 
+def resolve_section_list(sections: dict[str, Any], name: str, params: tuple[Param, ...]) -> list[tuple[str, dict[str, Any]]]:
+    """Check an array of tables ``[[name]]`` entry by entry against a parameter list.
+
+    Returns ``(where, values)`` per entry, ``where`` = ``"name[i]"`` for the
+    caller's own cross-checks (a known filter, a scan in range).
+    """
+    entries = sections.get(name, [])
+    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+        raise ValueError(f"{name}: expected [[{name}]] tables")
+    component = registry.Component("section", name, "", params, dict)
+    return [(f"{name}[{i}]", component.resolve(entry, f"{name}[{i}]")) for i, entry in enumerate(entries)]
+
+
 def resolve_paper(
     sections: dict[str, Any], filter_names: list[str] | set[str], params: tuple[Param, ...] = PAPER_PARAMS
 ) -> list[dict[str, Any]]:
@@ -88,13 +101,8 @@ def resolve_paper(
     Kinds with extra keys (a condition, a swept value) pass their own
     ``params`` and check those keys on the returned entries.
     """
-    entries = sections.get("paper", [])
-    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
-        raise ValueError("paper: expected [[paper]] tables")
     out = []
-    for i, entry in enumerate(entries):
-        where = f"paper[{i}]"
-        vals = registry.Component("section", "paper", "", params, dict).resolve(entry, where)
+    for where, vals in resolve_section_list(sections, "paper", params):
         if vals["filter"] not in filter_names:
             have = ", ".join(sorted(filter_names) if isinstance(filter_names, set) else filter_names)
             raise ValueError(f"{where}.filter: no filter named {vals['filter']!r} (have {have})")

@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from ..config.build import build_filters, build_scenario, resolve_section
+from ..config.build import build_filters, build_scenario, resolve_section, resolve_section_list
 from ..engine.montecarlo import monte_carlo
 from .. import registry
 from ..registry import Param, register
@@ -529,13 +529,8 @@ def _resolve_variants(sections: dict[str, Any]) -> list[dict[str, Any]]:
 
 
 def _resolve_claim_list(sections: dict[str, Any], names_of: dict[str, list[str]], has_variants: bool) -> list[dict[str, Any]]:
-    entries = sections.get("claim", [])
-    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
-        raise ValueError("claim: expected [[claim]] tables")
     out = []
-    for i, entry in enumerate(entries):
-        where = f"claim[{i}]"
-        c = registry.Component("section", "claim", "", CLAIM_ENTRY_PARAMS, dict).resolve(entry, where)
+    for where, c in resolve_section_list(sections, "claim", CLAIM_ENTRY_PARAMS):
         if has_variants and c["variant"] not in names_of or c["variant"] == "" and has_variants:
             known = ", ".join(k for k in names_of if k)
             raise ValueError(f"{where}.variant: no variant {c['variant']!r} (have {known})")

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from .. import registry
-from ..config.build import build_scenario, resolve_section
+from ..config.build import build_scenario, resolve_section, resolve_section_list
 from ..multitarget.metrics import gospa, gospa_summary, track_counts, track_switches
 from ..multitarget.tracking import MultiTrackResult
 from ..registry import Param, register
@@ -286,13 +286,8 @@ def _multitarget(sections: dict[str, Any], path: Path, name: str) -> MultiTarget
 
 def resolve_claims(sections: dict[str, Any], names: list[str], steps: int) -> list[dict[str, Any]]:
     """Check the ``[[claim]]`` tables: known tracker names, scans within the scenario's."""
-    entries = sections.get("claim", [])
-    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
-        raise ValueError("claim: expected [[claim]] tables")
     out = []
-    for i, entry in enumerate(entries):
-        where = f"claim[{i}]"
-        c = registry.Component("section", "claim", "", CLAIM_PARAMS, dict).resolve(entry, where)
+    for where, c in resolve_section_list(sections, "claim", CLAIM_PARAMS):
         for key in ("baseline", "tracker"):
             if c[key] not in names:
                 raise ValueError(f"{where}.{key}: no tracker named {c[key]!r} (have {', '.join(names)})")

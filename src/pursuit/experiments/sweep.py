@@ -50,7 +50,7 @@ import numpy as np
 
 from .. import metrics, registry
 from ..compute import numba_available
-from ..config.build import build_filter, build_filters, build_scenario, resolve_paper, resolve_section
+from ..config.build import build_filter, build_filters, build_scenario, resolve_paper, resolve_section, resolve_section_list
 from ..engine.montecarlo import FILTER_STREAM, SCENARIO_STREAM, monte_carlo
 from ..engine.snapshots import particle_snapshots
 from ..registry import Param, register
@@ -765,14 +765,9 @@ def _resolve_claims(
     sections: dict[str, Any], plan: SweepPlan, names: set[str], labels: list[str], columns: list[str], swept_names: set[str]
 ) -> list[dict[str, Any]]:
     """Check the ``[[claim]]`` tables; a value claim without ``value`` takes the matching ``[[paper]]`` entry's."""
-    entries = sections.get("claim", [])
-    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
-        raise ValueError("claim: expected [[claim]] tables")
     values = plan.sweep["values"]
     out = []
-    for i, entry in enumerate(entries):
-        where = f"claim[{i}]"
-        c = registry.Component("section", "claim", "", CLAIM_PARAMS, dict).resolve(entry, where)
+    for where, c in resolve_section_list(sections, "claim", CLAIM_PARAMS):
         if labels and c["variant"] not in labels:
             raise ValueError(f"{where}.variant: expected one of the variants ({', '.join(labels)}), got {c['variant']!r}")
         if c["at"] is not None and not _is_swept(c["at"], values):
