@@ -215,3 +215,57 @@ def test_imm_smoother_is_the_m_step():
     out = imm_smooth(pm, pc, modes.prior[:, :, 0], modes.transition, F, Q, zs, model.H, model.R, weight=W, measured=measured, active=active)
     np.testing.assert_array_equal(got[0], out.mean)
     np.testing.assert_array_equal(got[5][..., 0, :], out.filt_mode_probs)
+
+
+# --------------------------------------------------------------------------
+# from a config
+# --------------------------------------------------------------------------
+TOML = """
+[experiment]
+kind = "multitarget"
+runs = 2
+seed = 3
+
+[scenario]
+type = "mt-crossing"
+steps = 8
+
+[[trackers]]
+name = "MM"
+type = "mmpmht"
+turn_rates = [0.0, 0.05, -0.05]
+transition = [[0.9, 0.05, 0.05], [0.05, 0.9, 0.05], [0.05, 0.05, 0.9]]
+"""
+
+
+def test_turn_modes_from_a_config(tmp_path):
+    from pursuit.experiment import load_experiment
+
+    path = tmp_path / "mt.toml"
+    path.write_text(TOML)
+    tr = load_experiment(path).plan.trackers[0]
+    assert tr.turn_rates == (0.0, 0.05, -0.05) and tr.noise_scales == (1.0, 1.0, 1.0)
+    assert tr.transition[0] == (0.9, 0.05, 0.05)
+    path.write_text(TOML.replace("transition = [[0.9, 0.05, 0.05], [0.05, 0.9, 0.05], [0.05, 0.05, 0.9]]\n", "noise_scales = [1.0, 1.0, 100.0]\n"))
+    tr = load_experiment(path).plan.trackers[0]
+    assert tr.noise_scales == (1.0, 1.0, 100.0) and tr.transition is None and tr.stay == 0.95
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (("turn_rates = [0.0, 0.05, -0.05]", "turn_rates = []"), "trackers[0].turn_rates"),
+        (("turn_rates = [0.0, 0.05, -0.05]", 'turn_rates = "left"'), "trackers[0].turn_rates: expected a list of numbers"),
+        (("turn_rates = [0.0, 0.05, -0.05]", "turn_rates = [0.0, 0.05]"), "trackers[0].transition: expected a (2, 2) Markov matrix"),
+        (("[0.05, 0.05, 0.9]]", "[0.05, 0.05, 0.8]]"), "trackers[0].transition"),
+        (("turn_rates = [0.0, 0.05, -0.05]", "turn_rates = [0.0, 0.05, -0.05]\nnoise_scales = [1.0, 2.0]"), "trackers[0].noise_scales: expected one scale per turn rate"),
+    ],
+)  # fmt: skip
+def test_turn_modes_config_refusals_name_the_field(tmp_path, edit, message):
+    from pursuit.experiment import ConfigError, load_experiment
+
+    path = tmp_path / "mt.toml"
+    path.write_text(TOML.replace(*edit, 1))
+    with pytest.raises(ConfigError) as info:
+        load_experiment(path)
+    assert message in str(info.value)

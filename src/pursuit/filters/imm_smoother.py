@@ -192,13 +192,14 @@ def imm_smooth(
         Wk = np.where(upd, W[..., k], 0.0)[..., None, None, None]
         PHt = P_pred @ np.swapaxes(Hk, -1, -2)
         Sw = Wk * (Hk @ PHt) + R
-        KtW = np.linalg.solve(Sw, np.swapaxes(PHt, -1, -2))  # S'⁻¹ H P⁻
         nu = z[..., k, None, :] - np.einsum("...ab,...b->...a", Hk, x_pred)
+        rhs = np.concatenate([np.swapaxes(PHt, -1, -2), np.broadcast_to(nu[..., None], (*PHt.shape[:-2], nu.shape[-1], 1))], axis=-1)
+        both = np.linalg.solve(Sw, rhs)  # S'⁻¹ [H P⁻, ν] in one solve
+        KtW, sol = both[..., :-1], both[..., -1]
         x_upd = x_pred + Wk[..., 0] * np.einsum("...ba,...b->...a", KtW, nu)
         P_upd = symmetrize(P_pred - Wk * (PHt @ KtW))
         # log N(ν; 0, S) with S = S' / W: W νᵀS'⁻¹ν and log det 2πS = log det 2πS' − m log W
         m = Sw.shape[-1]
-        sol = np.linalg.solve(Sw, nu[..., None])[..., 0]
         Wj = Wk[..., 0, 0]
         logdet = np.linalg.slogdet(Sw)[1] - m * np.log(np.where(upd, W[..., k], 1.0))[..., None]
         loglam = -0.5 * (Wj * np.einsum("...a,...a->...", nu, sol) + logdet + m * _LOG_2PI)

@@ -47,7 +47,7 @@ PMHT; with Π = I and a known prior mode it is that mode's smoother.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import partial
+from functools import lru_cache, partial
 
 import numpy as np
 
@@ -147,6 +147,13 @@ def mode_process_noise(
     return np.where(at_first, Qf[:, :, None], Qs)
 
 
+@lru_cache(maxsize=256)
+def _turn_blocks(T: float, rates: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The constant-velocity ``(4, 4)`` block of step T and the turns' ``(J, 4, 4)`` (cached: EM asks every iteration)."""
+    cv = ConstantTurn(omega=0.0, q=0.0, dt=T).transition_matrix()
+    return cv, np.stack([ConstantTurn(omega=w, q=0.0, dt=T).transition_matrix() for w in rates])
+
+
 def mode_transitions(model: LinearModel, rates: np.ndarray, scales: np.ndarray, plane: tuple[int, int, int, int]):
     """Each mode's F and Q into each window step, ``(B, J, n, n)`` twice: turns at ``rates`` in the plane ``(x, vx, y, vy)``.
 
@@ -156,16 +163,16 @@ def mode_transitions(model: LinearModel, rates: np.ndarray, scales: np.ndarray, 
     B, n = model.F.shape[0], model.F.shape[-1]
     idx = np.ix_(plane, plane)
     F = np.broadcast_to(model.F[:, None], (B, len(rates), n, n)).copy()
+    key = tuple(float(w) for w in rates)
     for b in range(B):
         T = float(model.F[b, plane[0], plane[1]])
-        cv = ConstantTurn(omega=0.0, q=0.0, dt=T).transition_matrix() if T > 0 else None
-        if cv is None or not np.allclose(model.F[b][idx], cv, rtol=0, atol=1e-12):
+        blocks = _turn_blocks(T, key) if T > 0 else None
+        if blocks is None or np.abs(model.F[b][idx] - blocks[0]).max() > 1e-12:
             raise ValueError(
                 "turn_rates: turn modes need a constant-velocity motion model whose (x, vx, y, vy) block is "
                 f"[[1, T, 0, 0], [0, 1, 0, 0], [0, 0, 1, T], [0, 0, 0, 1]]; got {model.F[b][idx].tolist()}"
             )
-        for j, w in enumerate(rates):
-            F[b, j][idx] = ConstantTurn(omega=float(w), q=0.0, dt=T).transition_matrix()
+        F[b][(slice(None), *idx)] = blocks[1]
     Q = scales[:, None, None] * model.Q[:, None]
     return F, Q
 
