@@ -1,4 +1,4 @@
-"""Multiple-model PMHT: process-noise modes as missing data in PMHT's EM (docs/spec/05-multi-target-pmht.md §3, option).
+"""Multiple-model PMHT: process-noise or turn modes as missing data in PMHT's EM (docs/spec/05-multi-target-pmht.md §3, option).
 
 Each track's motion switches between J modes that share F and differ in
 the scale of the process noise, ``x_t = F x_{t−1} + w_t``,
