@@ -269,3 +269,23 @@ def test_turn_modes_config_refusals_name_the_field(tmp_path, edit, message):
     with pytest.raises(ConfigError) as info:
         load_experiment(path)
     assert message in str(info.value)
+
+
+def test_motion_mode_posteriors_with_zero_rates_are_the_noise_modes():
+    """Rates all 0: the per-mode-F emissions are the noise modes' (γ, α and the process term to 1e-10), late starts too."""
+    from pursuit.multitarget.mmpmht import motion_mode_posteriors, noise_mode_posteriors
+
+    B, runs, L = 5, 2, 3
+    rng = np.random.default_rng(8)
+    pm = rng.normal(0, 3, (runs, L, 4))
+    pc = np.broadcast_to(PRIOR_COV, (runs, L, 4, 4)).copy()
+    model, _, start = window_inputs(pm, np.full((B, runs, 1, 2), np.nan), B)
+    first = rng.integers(0, B, (runs, L))
+    active = np.arange(B) >= first[..., None]
+    X = start + rng.normal(0, 0.5, start.shape)
+    tr = tracker(MMPMHTTracker, turn_rates=(0.0, 0.0, 0.0), noise_scales=(0.5, 1.0, 30.0), transition=((0.8, 0.15, 0.05), (0.3, 0.6, 0.1), (0.05, 0.25, 0.7)))
+    modes = tr._maneuver(runs, L)
+    got = motion_mode_posteriors(model, modes, X, pm, pc, first, active, rates=np.zeros(3), plane=(0, 1, 2, 3))
+    want = noise_mode_posteriors(model, modes, X, pm, pc, first, active)
+    for g, w in zip(got, want):
+        np.testing.assert_allclose(g, w, rtol=1e-10, atol=1e-12)
