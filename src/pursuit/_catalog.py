@@ -61,7 +61,7 @@ CATALOG: dict[str, list[tuple[str, str]]] = {
         ('gmphd', 'Gaussian-mixture PHD filter (Vo & Ma 2006): pruning, merging, estimates of weight >= extract, labels by tags'),
         ('gnn', 'Global nearest neighbour: 2-D assignment per scan within a chi-square gate'),
         ('jpda', 'Joint probabilistic data association: exact joint events within clusters, moment-matched update'),
-        ('mmpmht', 'Multiple-model PMHT: process-noise levels as a Markov chain estimated inside EM (exact EM; modes share F)'),
+        ('mmpmht', 'Multiple-model PMHT: process-noise levels (exact EM) or coordinated turns (an IMM smoother in the M-step) as a Markov chain'),
         ('pmht', 'Probabilistic multi-hypothesis tracker: EM over a sliding window of scans, a smoother per track (KF per-track filter)'),
     ],
 }

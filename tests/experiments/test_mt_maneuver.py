@@ -222,12 +222,13 @@ def test_claims_table_comes_first_and_judges_the_experiments_numbers(tmp_path):
 def test_mt_maneuver_loads_and_runs_tiny():
     exp = load_experiment(ROOT / "experiments" / "mt-maneuver.toml")
     names = [t.name for t in exp.plan.trackers]
-    assert names == ["GNN-EKF", "JPDA-EKF", "GNN-IMM", "JPDA-IMM", "PMHT", "EPMHT", "MM-PMHT"]
+    assert names == ["GNN-EKF", "JPDA-EKF", "GNN-IMM", "JPDA-IMM", "PMHT", "EPMHT", "MM-PMHT", "MM-PMHT-CT"]
+    assert exp.plan.trackers[7].turn_rates == (0.0, 0.05, -0.05, 0.0)
     assert isinstance(exp.plan.trackers[3].filter, InteractingMultipleModel)
     out = exp.plan.run(runs=2, seed=1)
     claims = out.tables[0]
-    assert claims.name == "claims" and len(claims.rows) == 4
-    assert {r[3] for r in claims.rows} == {"EPMHT", "JPDA-IMM", "MM-PMHT"}
+    assert claims.name == "claims" and len(claims.rows) == 5
+    assert {r[3] for r in claims.rows} == {"EPMHT", "JPDA-IMM", "MM-PMHT", "MM-PMHT-CT"}
     assert all(r[-1] in ("holds", "reversed", "not significant") for r in claims.rows)
     assert set(out.figures) == {"gospa", "scene"}
 

@@ -219,21 +219,30 @@ def _epmht(scenario, where: str = "tracker", **kw):
 @register(
     "tracker",
     "mmpmht",
-    "Multiple-model PMHT: process-noise levels as a Markov chain estimated inside EM (exact EM; modes share F)",
+    "Multiple-model PMHT: process-noise levels (exact EM) or coordinated turns (an IMM smoother in the M-step) as a Markov chain",
     params=(
         *_tracker_params(MMPMHTTracker),
         *params_from(MMPMHTTracker, list(_PMHT_DOCS), docs=_PMHT_DOCS),
         *params_from(
             MMPMHTTracker,
-            ["noise_scales", "stay"],
-            types={"noise_scales": "vector"},
-            docs={"noise_scales": "the modes' process noise as multiples of the motion model's Q", "stay": "the Markov chain's probability of keeping its mode"},
+            ["noise_scales", "turn_rates", "stay", "transition"],
+            types={"noise_scales": "vector", "turn_rates": "vector", "transition": "matrix"},
+            docs={
+                "noise_scales": "the modes' process noise as multiples of the motion model's Q (default [1, 100]; all 1 with turn_rates)",
+                "turn_rates": "the modes' turn rates in rad/s (0: constant velocity), one per mode; the M-step is then an IMM smoother",
+                "stay": "the Markov chain's probability of keeping its mode",
+                "transition": "the full Markov matrix of the modes (list of rows) instead of stay",
+            },
         ),
     ),
     target=MMPMHTTracker,
 )
 def _mmpmht(scenario, where: str = "tracker", **kw):
-    kw["noise_scales"] = tuple(float(v) for v in kw["noise_scales"])
+    for key in ("noise_scales", "turn_rates"):
+        if kw.get(key) is not None:
+            kw[key] = tuple(float(v) for v in kw[key])
+    if kw.get("transition") is not None:
+        kw["transition"] = tuple(tuple(float(v) for v in row) for row in kw["transition"])
     return _build_tracker(MMPMHTTracker, scenario, where, **_volume_for(scenario, kw))
 
 

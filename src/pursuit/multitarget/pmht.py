@@ -190,7 +190,11 @@ class NoiseModes:
     the tracker carries them as EPMHT's); ``posteriors`` (the E-step's
     forward–backward pass over the modes, which also gives the process term
     of the objective) and ``process_noise`` (the M-step's per-slot Q) come
-    from the module that builds on this one.
+    from the module that builds on this one.  ``smoother``, when given,
+    replaces the M-step's smoother: ``smoother(model, modes, prior_mean,
+    prior_cov, active, measured, zs, W, H) -> (xs, Ps, xf, Pf, gamma, alpha)``
+    (modes with different F: the multiple-model PMHT's IMM smoother, whose
+    mode probabilities then replace the posteriors' γ and α).
     """
 
     scales: np.ndarray
@@ -198,6 +202,7 @@ class NoiseModes:
     prior: np.ndarray
     posteriors: Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray]]
     process_noise: Callable[..., np.ndarray]
+    smoother: Callable[..., tuple[np.ndarray, ...]] | None = None
 
 
 def em_window(
@@ -247,7 +252,8 @@ def em_window(
         or the multiple-model PMHT's noise modes (:class:`NoiseModes`): the
         modes are missing data too, the objective's process term is
         ``log Σ_modes p(X | modes) P(modes)`` and the M-step smooths with
-        each slot's and step's mode-averaged precision.
+        each slot's and step's mode-averaged precision (or, with its
+        ``smoother``, the modes' own smoother: an approximate M-step).
     """
     B, M, D, m = z.shape
     L, n = prior_mean.shape[1], prior_mean.shape[-1]
@@ -333,8 +339,12 @@ def em_window(
             H = np.broadcast_to(H, (*Xr.shape[:-1], *H.shape[-2:]))  # a shared Jacobian, per slot and step
             nu = np.einsum("mlbd,mlbdi->mlbi", wr, _residuals(model, zt[r], Xr)) / np.where(W > 0, W, 1.0)[..., None]
             zs = np.einsum("mlbij,mlbj->mlbi", H, Xr) + nu
-        Qs = None if modes is None else modes.process_noise(model, modes, gamma[r], pc, fr, ar)
-        new = _smooth(model, pm, pc, ar, ar & (W > 0), zs, W, ubar[r], H, Qs)
+        if modes is not None and modes.smoother is not None:  # an approximate M-step (the IMM smoother)
+            *new, g_m, a_m = modes.smoother(model, replace(modes, prior=modes.prior[r]), pm, pc, ar, ar & (W > 0), zs, W, H)
+            new = tuple(new)
+        else:
+            Qs = None if modes is None else modes.process_noise(model, modes, gamma[r], pc, fr, ar)
+            new = _smooth(model, pm, pc, ar, ar & (W > 0), zs, W, ubar[r], H, Qs)
         if smoothed is None:
             smoothed = new
         else:
@@ -347,7 +357,7 @@ def em_window(
             value = assoc + _process_loglik(model, X[r], ubar[r], pm, pc, fr, ar)
         else:
             g, a, proc = modes.posteriors(model, replace(modes, prior=modes.prior[r]), X[r], pm, pc, fr, ar)
-            gamma[r], alpha[r] = g, a
+            gamma[r], alpha[r] = (g, a) if modes.smoother is None else (g_m, a_m)
             value = assoc + proc
         iterations[r] = it
         history[it, r] = value
