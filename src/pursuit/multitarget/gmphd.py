@@ -299,36 +299,41 @@ class GMPHDTracker:
         hyp = evaluate_hypotheses(filt, state, z, alive, _UNUSED_GATE, k, dt)
         paired = hyp.pair >= 0  # (M, C, D): an alive component and a real detection
         with np.errstate(divide="ignore"):
-            log_num = np.where(paired, np.log(self.p_detect) + np.log(w)[..., None] + hyp.loglik, -np.inf)
+            log_num = (np.log(self.p_detect) + np.log(w))[..., None] + hyp.loglik
+        log_num[~paired] = -np.inf
         top = np.max(log_num, axis=1, initial=np.log(self.clutter_density))  # (M, D), for stability
-        den = self.clutter_density * np.exp(-top) + np.exp(log_num - top[:, None, :]).sum(axis=1)
-        w_pair = np.exp(log_num - top[:, None, :]) / den[:, None, :]  # 0 where not paired
+        w_pair = np.exp(log_num - top[:, None, :])  # 0 where not paired
+        w_pair /= (self.clutter_density * np.exp(-top) + w_pair.sum(axis=1))[:, None, :]
         explained = w_pair.sum(axis=1)  # (M, D)
 
         w_miss = np.where(alive, (1.0 - self.p_detect) * w, 0.0)
         cand_w = np.concatenate([w_miss, w_pair.reshape(M, C * D)], axis=1)  # missed first, then (c, d) c-major
         total = cand_w.sum(axis=1)
-        # Pruning here, before any state is copied: only the candidates above T are gathered, heaviest first.
-        keep = cand_w > self.prune
-        width = int(keep.sum(axis=1).max(initial=0))
-        order = np.argsort(np.where(keep, -cand_w, np.inf), axis=1, kind="stable")[:, :width]
-        kept = np.take_along_axis(keep, order, axis=1)
-        out_w = np.where(kept, np.take_along_axis(cand_w, order, axis=1), 0.0)
-        missed = order < C
-        comp = np.where(missed, order, (order - C) // D)  # the parent component
-        det = np.where(missed, 0, (order - C) % D)
-        rows = np.arange(M)[:, None]
+        # Pruning here, before any state is copied: only the candidates above T are gathered, heaviest first
+        # (a stable sort of the kept ones only: equal weights keep their candidate order).
+        r, col = np.nonzero(cand_w > self.prune)
+        by = np.lexsort((-cand_w[r, col], r))
+        r, col = r[by], col[by]
+        count = np.bincount(r, minlength=M)
+        width = int(count.max(initial=0))
+        slot = np.arange(r.size) - (np.cumsum(count) - count)[r]
         n = mean.shape[-1]
-        out_mean = np.where(missed[..., None], hyp.missed.mean[rows, comp], 0.0)
-        pred_cov = np.broadcast_to(hyp.missed.cov, (M, C, n, n))
-        out_cov = np.where(missed[..., None, None], pred_cov[rows, comp], np.eye(n))
-        flat = np.where(missed | ~kept, -1, hyp.pair[rows, comp, det])
-        if hyp.states is not None and (flat >= 0).any():
-            r, c = np.nonzero(flat >= 0)
-            out_mean[r, c] = hyp.states.mean[flat[r, c]]
-            out_cov[r, c] = np.broadcast_to(hyp.states.cov, (hyp.runs.size, n, n))[flat[r, c]]
-        out_cov = np.where(kept[..., None, None], out_cov, np.eye(n))
-        out_label = np.where(kept, label[rows, comp], -1)
+        out_w = np.zeros((M, width))
+        out_mean = np.zeros((M, width, n))
+        out_cov = np.broadcast_to(np.eye(n), (M, width, n, n)).copy()
+        out_label = np.full((M, width), -1, dtype=label.dtype)
+        out_w[r, slot] = cand_w[r, col]
+        missed = col < C
+        comp = np.where(missed, col, (col - C) // D)  # the parent component
+        out_label[r, slot] = label[r, comp]
+        rm, sm, cm = r[missed], slot[missed], comp[missed]
+        out_mean[rm, sm] = hyp.missed.mean[rm, cm]
+        out_cov[rm, sm] = np.broadcast_to(hyp.missed.cov, (M, C, n, n))[rm, cm]
+        if hyp.states is not None and not missed.all():
+            pair = hyp.pair[r[~missed], comp[~missed], (col[~missed] - C) % D]
+            rp, sp = r[~missed], slot[~missed]
+            out_mean[rp, sp] = hyp.states.mean[pair]
+            out_cov[rp, sp] = np.broadcast_to(hyp.states.cov, (hyp.runs.size, n, n))[pair]
         return out_w, out_mean, out_cov, out_label, explained, total
 
     def _fixed_births(self, M: int, next_label: np.ndarray) -> tuple[np.ndarray, ...]:
