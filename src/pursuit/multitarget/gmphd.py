@@ -470,9 +470,10 @@ def prune_merge(
     A, x, y, bound = _distance_terms(alive, mean, cov)
     centre = np.full((M, width), width)  # the column of the component each one merges into (width: empty slot)
     count = alive.sum(axis=1)
-    # Runs of about the same size together (a class per factor √2), each padded to its largest only: the
-    # pairs cost the square of the padded width; chunks of a class bound the memory (one chunk usually).
-    size_class = np.ceil(2.0 * np.log2(np.maximum(count, 1))).astype(np.int64)
+    # Runs of about the same size together (a class per factor √2 above 32 components), each padded to its
+    # largest only: the pairs cost the square of the padded width, and each class its own greedy rounds;
+    # chunks of a class bound the memory (one chunk usually).
+    size_class = np.ceil(2.0 * np.log2(np.maximum(count, _SMALL))).astype(np.int64)
     for c in np.unique(size_class[count > 0]):
         members = np.flatnonzero((size_class == c) & (count > 0))
         C = int(count[members].max())
@@ -488,6 +489,8 @@ def prune_merge(
 
 # (runs × C × C) pairs of one chunk of merge distances: about 50 MB of float64 temporaries
 _PAIR_BUDGET = 1 << 21
+# runs of up to this many components share one size class (their padding costs less than more rounds)
+_SMALL = 32
 
 
 def _distance_terms(alive: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, ...]:
