@@ -49,10 +49,11 @@ keeps its parent's; a merge keeps the label of its heaviest component.
 Two estimates can carry one label (a component of weight ≥ 1.5, or two
 components updated from one parent).
 
-**Loops.**  The Python loops are over scans and over the merge rounds
-(each round merges one cluster in every run at once; rounds = the most
-merged components of any run); everything else is vectorised over runs and
-components, with per-run component capacity held by weight-0 padding.
+**Loops.**  The Python loops are over scans and over the greedy merge
+rounds (each a few boolean operations on the adjacency of every pair, for
+all runs at once; rounds = the most groups of linked components of any
+run); everything else is vectorised over runs and components, with per-run
+component capacity held by weight-0 padding.
 """
 
 from __future__ import annotations
