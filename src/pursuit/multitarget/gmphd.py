@@ -488,7 +488,7 @@ def prune_merge(
     return _moment_match(w, mean, cov, label, alive, centre, cap)
 
 
-# (runs × C × C) pairs of one chunk of merge distances: about 50 MB of float64 temporaries
+# (runs × C × C) pairs of one chunk of merge distances: 16 MB a float64 array of them (a few are alive at once)
 _PAIR_BUDGET = 1 << 21
 # runs of up to this many components share one size class (their padding costs less than more rounds)
 _SMALL = 32
