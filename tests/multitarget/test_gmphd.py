@@ -242,6 +242,112 @@ def test_prune_merge_equals_the_direct_formula_far_from_the_origin(scale):
         np.testing.assert_allclose(out_m[r, got], ref_m, rtol=1e-12, atol=1e-9 * scale)
 
 
+def _vo_ma_reference(w, mean, cov, label, threshold, merge, cap):
+    """Vo & Ma's pruning, merging and cap written out for one run: (w, mean, cov, label) heaviest first."""
+    idx = [i for i in np.argsort(-w, kind="stable") if w[i] > threshold]
+    out = []
+    while idx:
+        j = idx[0]
+        group = [i for i in idx if (mean[i] - mean[j]) @ np.linalg.solve(cov[i], mean[i] - mean[j]) <= merge]
+        W = w[group].sum()
+        m = (w[group, None] * mean[group]).sum(0) / W
+        P = sum(w[i] * (cov[i] + np.outer(mean[i] - m, mean[i] - m)) for i in group) / W
+        out.append((W, m, P, label[j]))
+        idx = [i for i in idx if i not in group]
+    out.sort(key=lambda t: -t[0])  # stable: equal weights keep the order of the rounds
+    return out[:cap]
+
+
+def _random_mixtures(rng, runs, C, n):
+    """Clustered components of random SPD covariance, unsorted, some below T, runs of 0..C components."""
+    centres = rng.uniform(-50.0, 50.0, (runs, 4, n))
+    mean = centres[np.arange(runs)[:, None], rng.integers(0, 4, (runs, C))] + rng.normal(0.0, 1.5, (runs, C, n))
+    B = rng.normal(0.0, 0.7, (runs, C, n, n))
+    cov = B @ np.swapaxes(B, -1, -2) + 0.3 * np.eye(n)
+    w = rng.uniform(0.0, 1.0, (runs, C)) ** 3
+    w[rng.uniform(size=(runs, C)) < 0.1] = 1e-7  # pruned
+    size = rng.integers(0, C + 1, runs)  # runs of very different sizes (every size class of the pairs)
+    w[np.arange(C)[None, :] >= size[:, None]] = 0.0
+    label = rng.permutation(runs * C).reshape(runs, C)
+    return w, mean, cov, label
+
+
+@pytest.mark.parametrize("n", [1, 2, 4])
+def test_prune_merge_equals_vo_ma_written_out(n):
+    """All pairs' distances at once, greedy rounds on their adjacency, moments by segment sums: the same
+    groups, labels and cap as the direct algorithm, weights and moments to 1e-12, over runs of every size."""
+    rng = np.random.default_rng(21 + n)
+    runs, C = 40, 60
+    w, mean, cov, label = _random_mixtures(rng, runs, C, n)
+    for cap in (100, 7):
+        out_w, out_m, out_P, out_l = prune_merge(w, mean, cov, label, 1e-5, 4.0, cap)
+        merged = 0
+        for r in range(runs):
+            ref = _vo_ma_reference(w[r], mean[r], cov[r], label[r], 1e-5, 4.0, cap)
+            got = out_w[r] > 0
+            assert got.sum() == len(ref)
+            np.testing.assert_array_equal(out_l[r, got], [t[3] for t in ref])
+            np.testing.assert_array_equal(out_l[r, ~got], -1)
+            if ref:
+                np.testing.assert_allclose(out_w[r, got], [t[0] for t in ref], rtol=1e-12)
+                np.testing.assert_allclose(out_m[r, got], [t[1] for t in ref], rtol=1e-12, atol=1e-12)
+                np.testing.assert_allclose(out_P[r, got], [t[2] for t in ref], rtol=1e-12, atol=1e-12)
+            merged += (w[r] > 1e-5).sum() - len(ref)
+        assert out_w.shape[1] == min(cap, max(len(_vo_ma_reference(w[r], mean[r], cov[r], label[r], 1e-5, 4.0, 1000)) for r in range(runs)))
+    assert merged > 100  # the case merges a lot, not only singletons
+
+
+def test_prune_merge_chunks_of_runs_change_no_bit(monkeypatch):
+    """The (runs, C, C) pairs are computed in chunks of runs to bound memory: the chunking changes nothing."""
+    import pursuit.multitarget.gmphd as gmphd
+
+    rng = np.random.default_rng(5)
+    w, mean, cov, label = _random_mixtures(rng, 30, 50, 4)
+    whole = prune_merge(w, mean, cov, label, 1e-5, 4.0, 100)
+    monkeypatch.setattr(gmphd, "_PAIR_BUDGET", 1)  # one run at a time
+    for a, b in zip(whole, prune_merge(w, mean, cov, label, 1e-5, 4.0, 100)):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_prune_merge_nothing_kept_and_sorted_input():
+    # nothing above T: no slot
+    out = prune_merge(np.full((2, 3), 1e-7), np.zeros((2, 3, 2)), np.broadcast_to(np.eye(2), (2, 3, 2, 2)), np.zeros((2, 3), int))
+    assert [a.shape for a in out] == [(2, 0), (2, 0, 2), (2, 0, 2, 2), (2, 0)]
+    # input already pruned and heaviest first (as the tracker's update hands it over) equals the same input shuffled
+    rng = np.random.default_rng(8)
+    w, mean, cov, label = _random_mixtures(rng, 10, 30, 2)
+    order = np.argsort(np.where(w > 1e-5, -w, np.inf), axis=1, kind="stable")
+    sw, sm, sc, sl = (np.take_along_axis(a, order.reshape(*order.shape, *(1,) * (a.ndim - 2)), axis=1) for a in (w, mean, cov, label))
+    sw = np.where(sw > 1e-5, sw, 0.0)
+    for a, b in zip(prune_merge(w, mean, cov, label), prune_merge(sw, sm, sc, sl)):
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 6])
+def test_spd_inverse_equals_lapack(n):
+    """The entry-by-entry Cholesky inverse of the merge distances: LAPACK's inverse to round-off (scaled by the
+    condition number), exactly symmetric; a matrix that is not positive definite goes to LAPACK."""
+    from pursuit.multitarget.gmphd import _spd_inverse
+
+    rng = np.random.default_rng(n)
+    B = rng.normal(size=(500, n, n))
+    P = B @ np.swapaxes(B, -1, -2) + 0.05 * np.eye(n)
+    P[:50] *= 10.0 ** rng.uniform(-8, 8, (50, 1, 1))
+    scale = np.sqrt(10.0 ** rng.uniform(-4, 4, (500, n)))
+    P[50:100] *= scale[50:100, :, None] * scale[50:100, None, :]  # badly scaled axes
+    A = _spd_inverse(P)
+    np.testing.assert_array_equal(A, np.swapaxes(A, -1, -2))
+    want = np.linalg.inv(P)
+    cond = np.linalg.cond(P)
+    err = np.abs(A - want).max(axis=(1, 2)) / np.abs(want).max(axis=(1, 2))
+    assert (err <= 1e-13 * np.maximum(cond, 1.0)).all()
+    indefinite = np.eye(n)
+    indefinite[0, 0] = -2.0
+    np.testing.assert_array_equal(_spd_inverse(indefinite[None])[0], np.linalg.inv(indefinite))
+    with pytest.raises(np.linalg.LinAlgError):
+        _spd_inverse(np.zeros((1, n, n)))
+
+
 def test_extract_estimates_by_hand():
     w = np.array([[1.6, 0.5, 0.49, 2.2], [0.0, 0.0, 0.0, 0.0]])
     mean = np.arange(8.0).reshape(2, 4, 1)

@@ -49,10 +49,11 @@ keeps its parent's; a merge keeps the label of its heaviest component.
 Two estimates can carry one label (a component of weight ≥ 1.5, or two
 components updated from one parent).
 
-**Loops.**  The Python loops are over scans and over the merge rounds
-(each round merges one cluster in every run at once; rounds = the most
-merged components of any run); everything else is vectorised over runs and
-components, with per-run component capacity held by weight-0 padding.
+**Loops.**  The Python loops are over scans and over the greedy merge
+rounds (each a few boolean operations on the adjacency of every pair, for
+all runs at once; rounds = the most groups of linked components of any
+run); everything else is vectorised over runs and components, with per-run
+component capacity held by weight-0 padding.
 """
 
 from __future__ import annotations
@@ -299,36 +300,41 @@ class GMPHDTracker:
         hyp = evaluate_hypotheses(filt, state, z, alive, _UNUSED_GATE, k, dt)
         paired = hyp.pair >= 0  # (M, C, D): an alive component and a real detection
         with np.errstate(divide="ignore"):
-            log_num = np.where(paired, np.log(self.p_detect) + np.log(w)[..., None] + hyp.loglik, -np.inf)
+            log_num = (np.log(self.p_detect) + np.log(w))[..., None] + hyp.loglik
+        log_num[~paired] = -np.inf
         top = np.max(log_num, axis=1, initial=np.log(self.clutter_density))  # (M, D), for stability
-        den = self.clutter_density * np.exp(-top) + np.exp(log_num - top[:, None, :]).sum(axis=1)
-        w_pair = np.exp(log_num - top[:, None, :]) / den[:, None, :]  # 0 where not paired
+        w_pair = np.exp(log_num - top[:, None, :])  # 0 where not paired
+        w_pair /= (self.clutter_density * np.exp(-top) + w_pair.sum(axis=1))[:, None, :]
         explained = w_pair.sum(axis=1)  # (M, D)
 
         w_miss = np.where(alive, (1.0 - self.p_detect) * w, 0.0)
         cand_w = np.concatenate([w_miss, w_pair.reshape(M, C * D)], axis=1)  # missed first, then (c, d) c-major
         total = cand_w.sum(axis=1)
-        # Pruning here, before any state is copied: only the candidates above T are gathered, heaviest first.
-        keep = cand_w > self.prune
-        width = int(keep.sum(axis=1).max(initial=0))
-        order = np.argsort(np.where(keep, -cand_w, np.inf), axis=1, kind="stable")[:, :width]
-        kept = np.take_along_axis(keep, order, axis=1)
-        out_w = np.where(kept, np.take_along_axis(cand_w, order, axis=1), 0.0)
-        missed = order < C
-        comp = np.where(missed, order, (order - C) // D)  # the parent component
-        det = np.where(missed, 0, (order - C) % D)
-        rows = np.arange(M)[:, None]
+        # Pruning here, before any state is copied: only the candidates above T are gathered, heaviest first
+        # (a stable sort of the kept ones only: equal weights keep their candidate order).
+        r, col = np.nonzero(cand_w > self.prune)
+        by = np.lexsort((-cand_w[r, col], r))
+        r, col = r[by], col[by]
+        count = np.bincount(r, minlength=M)
+        width = int(count.max(initial=0))
+        slot = np.arange(r.size) - (np.cumsum(count) - count)[r]
         n = mean.shape[-1]
-        out_mean = np.where(missed[..., None], hyp.missed.mean[rows, comp], 0.0)
-        pred_cov = np.broadcast_to(hyp.missed.cov, (M, C, n, n))
-        out_cov = np.where(missed[..., None, None], pred_cov[rows, comp], np.eye(n))
-        flat = np.where(missed | ~kept, -1, hyp.pair[rows, comp, det])
-        if hyp.states is not None and (flat >= 0).any():
-            r, c = np.nonzero(flat >= 0)
-            out_mean[r, c] = hyp.states.mean[flat[r, c]]
-            out_cov[r, c] = np.broadcast_to(hyp.states.cov, (hyp.runs.size, n, n))[flat[r, c]]
-        out_cov = np.where(kept[..., None, None], out_cov, np.eye(n))
-        out_label = np.where(kept, label[rows, comp], -1)
+        out_w = np.zeros((M, width))
+        out_mean = np.zeros((M, width, n))
+        out_cov = np.broadcast_to(np.eye(n), (M, width, n, n)).copy()
+        out_label = np.full((M, width), -1, dtype=label.dtype)
+        out_w[r, slot] = cand_w[r, col]
+        missed = col < C
+        comp = np.where(missed, col, (col - C) // D)  # the parent component
+        out_label[r, slot] = label[r, comp]
+        rm, sm, cm = r[missed], slot[missed], comp[missed]
+        out_mean[rm, sm] = hyp.missed.mean[rm, cm]
+        out_cov[rm, sm] = np.broadcast_to(hyp.missed.cov, (M, C, n, n))[rm, cm]
+        if hyp.states is not None and not missed.all():
+            pair = hyp.pair[r[~missed], comp[~missed], (col[~missed] - C) % D]
+            rp, sp = r[~missed], slot[~missed]
+            out_mean[rp, sp] = hyp.states.mean[pair]
+            out_cov[rp, sp] = np.broadcast_to(hyp.states.cov, (hyp.runs.size, n, n))[pair]
         return out_w, out_mean, out_cov, out_label, explained, total
 
     def _fixed_births(self, M: int, next_label: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -427,8 +433,9 @@ def prune_merge(
     the heaviest remaining component j and every remaining i with
     ``(m_i − m_j)ᵀ P_i⁻¹ (m_i − m_j) ≤ merge`` become one component:
     ``w = Σ w_i``, ``m = Σ w_i m_i / w``,
-    ``P = Σ w_i (P_i + (m − m_i)(m − m_i)ᵀ) / w``, with the label of j.
-    Finally only the ``cap`` heaviest are kept.
+    ``P = Σ w_i (P_i + (m − m_i)(m − m_i)ᵀ) / w``, with the label of j
+    (the sums run over the group heaviest first).  Finally only the ``cap``
+    heaviest are kept.
 
     Parameters
     ----------
@@ -444,80 +451,195 @@ def prune_merge(
         ``(M, J)`` arrays with J ≤ ``cap`` the most components of any run,
         heaviest first, padded with weight 0 (label −1).
     """
-    M, C = w.shape
+    M = w.shape[0]
     n = mean.shape[-1]
     keep = w > threshold
     width = int(keep.sum(axis=1).max(initial=0))
     # Kept components first, heaviest first: the merge order then does not depend on the input order.
-    order = np.argsort(np.where(keep, -w, np.inf), axis=1, kind="stable")[:, :width]
-    w = np.take_along_axis(np.where(keep, w, 0.0), order, axis=1)
-    mean = np.take_along_axis(mean, order[..., None], axis=1)
-    cov = np.take_along_axis(cov, order[..., None, None], axis=1)
-    label = np.take_along_axis(label, order, axis=1)
-    remaining = w > 0
-    inv = np.linalg.inv(np.where(remaining[..., None, None], cov, np.eye(n)))
-    # d²_i = (m_i − m_j)ᵀ P_i⁻¹ (m_i − m_j) = c_i − 2 a_i·m_j + A_i : m_j m_jᵀ with A_i = P_i⁻¹ symmetrised,
-    # a_i = A_i m_i, c_i = m_iᵀ a_i, computed once: a round then costs two dot products per component
-    # instead of a small matrix product (the merge rounds were most of GM-PHD's time)
-    A = 0.5 * (inv + np.swapaxes(inv, -1, -2))
+    key = np.where(keep, -w, np.inf)
+    if (key[:, 1:] >= key[:, :-1]).all():  # already so (the tracker's update hands them over sorted): no copy
+        w, mean, cov, label = np.where(keep, w, 0.0)[:, :width], mean[:, :width], cov[:, :width], label[:, :width]
+    else:
+        order = np.argsort(key, axis=1, kind="stable")[:, :width]
+        w = np.take_along_axis(np.where(keep, w, 0.0), order, axis=1)
+        mean = np.take_along_axis(mean, order[..., None], axis=1)
+        cov = np.take_along_axis(cov, order[..., None, None], axis=1)
+        label = np.take_along_axis(label, order, axis=1)
+    alive = w > 0
+    if not alive.any():
+        return np.zeros((M, 0)), np.zeros((M, 0, n)), np.zeros((M, 0, n, n)), np.zeros((M, 0), dtype=np.int64)
+    A, x, y, bound = _distance_terms(alive, mean, cov)
+    centre = np.full((M, width), width)  # the column of the component each one merges into (width: empty slot)
+    count = alive.sum(axis=1)
+    # Runs of about the same size together (a class per factor √2 above 32 components), each padded to its
+    # largest only: the pairs cost the square of the padded width, and each class its own greedy rounds;
+    # chunks of a class bound the memory (one chunk usually).
+    size_class = np.ceil(2.0 * np.log2(np.maximum(count, _SMALL))).astype(np.int64)
+    for c in np.unique(size_class[count > 0]):
+        members = np.flatnonzero((size_class == c) & (count > 0))
+        C = int(count[members].max())
+        step = max(1, _PAIR_BUDGET // (C * C))
+        for start in range(0, members.size, step):
+            runs = members[start : start + step]
+            live = alive[runs, :C]
+            adj = _merge_pairs(live, mean[runs, :C], A[runs, :C], x[runs, :C], y[runs, :C], bound[runs, :C], merge)
+            group = _greedy_groups(live, adj)
+            centre[runs, :C] = np.where(group < C, group, width)
+    return _moment_match(w, mean, cov, label, alive, centre, cap)
+
+
+# (runs × C × C) pairs of one chunk of merge distances: 16 MB a float64 array of them (a few are alive at once)
+_PAIR_BUDGET = 1 << 21
+# runs of up to this many components share one size class (their padding costs less than more rounds)
+_SMALL = 32
+
+
+def _distance_terms(alive: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The terms of the merge distances of every pair, for :func:`_merge_pairs`.
+
+    d²(i from j) = (m_i − m_j)ᵀ A_i (m_i − m_j) = c_i − 2 a_i·m_j + Σ_kl A_i,kl m_j,k m_j,l with
+    A_i = P_i⁻¹, a_i = A_i m_i, c_i = m_iᵀ a_i: the dot product of ``x_i`` = (c_i, a_i, the
+    upper triangle of A_i with the off-diagonal doubled) and ``y_j`` = (1, −2 m_j, m_j,k m_j,l),
+    so that all pairs of a run are one matrix product.  The expansion cancels when ‖m‖ is large
+    against the spread: its rounding error is at most about (n² + n + 2)·eps·‖A_i‖_F·(‖m_i‖ + ‖m_j‖)²;
+    ``bound (M, C)`` is that with the largest ‖m_j‖ of the run.
+
+    Returns ``A (M, C, n, n)`` (identity in empty slots), ``x``, ``y`` ``(M, C, 1 + n + n(n+1)/2)``
+    and ``bound``.
+    """
+    M, C, n = mean.shape
+    A = np.broadcast_to(np.eye(n), (M, C, n, n)).copy()
+    A[alive] = _spd_inverse(cov[alive])
     a = np.einsum("mcij,mcj->mci", A, mean)
     c = np.einsum("mci,mci->mc", a, mean)
-    # The expansion cancels when |m| is large against the spread: its rounding error is at most about
-    # (n² + 2)·eps·‖A_i‖_F·(‖m_i‖ + ‖m_j‖)², so a distance that close to U is computed again directly.
-    a_norm = np.sqrt(np.einsum("mcij,mcij->mc", A, A))
-    m_norm = np.sqrt(np.einsum("mci,mci->mc", mean, mean))
-    rel_err = 4.0 * (n * n + 2) * np.finfo(float).eps
-    A = A.reshape(M, -1, n * n)
+    k, l = np.triu_indices(n)
+    twice = np.where(k == l, 1.0, 2.0)  # exact: a power of two
+    x = np.concatenate([c[..., None], a, A[..., k, l] * twice], axis=-1)
+    y = np.concatenate([np.ones((M, C, 1)), -2.0 * mean, mean[..., k] * mean[..., l]], axis=-1)
+    m_norm = np.where(alive, np.sqrt(np.einsum("mci,mci->mc", mean, mean)), 0.0)
+    bound = 4.0 * (n * n + n + 2) * np.finfo(float).eps * np.sqrt(np.einsum("mcij,mcij->mc", A, A))
+    bound *= (m_norm + m_norm.max(axis=1, initial=0.0, keepdims=True)) ** 2
+    return A, x, y, bound
 
-    out_w = np.zeros((M, width))
-    out_mean = np.zeros((M, width, n))
-    out_cov = np.broadcast_to(np.eye(n), (M, width, n, n)).copy()
-    out_label = np.full((M, width), -1, dtype=np.int64)
+
+def _merge_pairs(
+    alive: np.ndarray, mean: np.ndarray, A: np.ndarray, x: np.ndarray, y: np.ndarray, bound: np.ndarray, merge: float
+) -> np.ndarray:
+    """``adj (M, C, C)``: ``adj[m, j, i]`` when i is within U of j, ``(m_i − m_j)ᵀ P_i⁻¹ (m_i − m_j) ≤ U``.
+
+    Every pair at once from :func:`_distance_terms`, one matrix product per
+    run; a distance within ``bound`` of U is computed again directly.  The
+    diagonal is True (j is in its own group whatever the rounding).
+    """
+    C = mean.shape[1]
+    d2 = np.matmul(y, np.swapaxes(x, 1, 2))  # (M, C_j, C_i)
+    d2 -= merge
+    adj = d2 <= 0.0  # the same as d2 ≤ U before the subtraction (x − U rounds to 0 only at x = U)
+    near = np.abs(d2, out=d2) <= bound[:, None, :]
+    if near.any():  # rare: coordinates far larger than the spread
+        runs, js, cols = np.nonzero(near & alive[:, :, None] & alive[:, None, :])
+        diff = mean[runs, cols] - mean[runs, js]
+        adj[runs, js, cols] = np.einsum("ki,kij,kj->k", diff, A[runs, cols], diff) <= merge
+    diag = np.arange(C)
+    adj[:, diag, diag] = True
+    return adj
+
+
+def _spd_inverse(P: np.ndarray) -> np.ndarray:
+    """Inverses ``(N, n, n)`` of symmetric positive-definite matrices, by Cholesky: ``P⁻¹ = L⁻ᵀ L⁻¹``.
+
+    Entry by entry on contiguous ``(N,)`` vectors, a Python loop over the n²
+    entries only: LAPACK's batched ``inv`` costs over a microsecond a matrix
+    on stacks of tiny ones.  The result is exactly symmetric.  A matrix that
+    is not positive definite in floating point (a pivot ≤ 0 or not finite)
+    is inverted by ``np.linalg.inv`` instead.
+    """
+    N, n, _ = P.shape
+    Pt = np.ascontiguousarray(np.moveaxis(P, 0, -1), dtype=float)  # (n, n, N)
+    L: list[list[Any]] = [[None] * n for _ in range(n)]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for j in range(n):
+            pivot = Pt[j, j] - sum((L[j][k] * L[j][k] for k in range(j)), np.zeros(N))
+            L[j][j] = np.sqrt(pivot)
+            for i in range(j + 1, n):
+                L[i][j] = (Pt[i, j] - sum((L[i][k] * L[j][k] for k in range(j)), np.zeros(N))) / L[j][j]
+        # X = L⁻¹ (lower triangular), column by column
+        X: list[list[Any]] = [[None] * n for _ in range(n)]
+        for j in range(n):
+            X[j][j] = 1.0 / L[j][j]
+            for i in range(j + 1, n):
+                X[i][j] = -sum((L[i][k] * X[k][j] for k in range(j, i)), np.zeros(N)) / L[i][i]
+    A = np.empty((n, n, N))
+    for i in range(n):
+        for j in range(i + 1):
+            A[i, j] = A[j, i] = sum((X[k][i] * X[k][j] for k in range(i, n)), np.zeros(N))
+    A = np.moveaxis(A, -1, 0)
+    bad = ~(np.stack([L[j][j] for j in range(n)], axis=-1) > 0).all(axis=-1) | ~np.isfinite(A).all(axis=(1, 2))
+    if bad.any():
+        A[bad] = np.linalg.inv(P[bad])
+    return A
+
+
+def _greedy_groups(alive: np.ndarray, adj: np.ndarray) -> np.ndarray:
+    """``(M, C)``: the column of the component each one merges into, for columns heaviest first.
+
+    Vo & Ma's greedy rounds on the adjacency: the heaviest remaining j takes
+    every remaining i with ``adj[j, i]``.  A component with no neighbour
+    either way is its own group whatever the order, so the rounds run over
+    the others only: as many as the busiest run has groups of them, each a
+    few boolean operations over all runs at once.
+    """
+    M, C = alive.shape
+    diag = np.arange(C)
+    linked = adj & alive[:, :, None] & alive[:, None, :]
+    linked[:, diag, diag] = False
+    remaining = linked.any(axis=2) | linked.any(axis=1)
+    centre = np.where(alive, diag, C)  # C marks an empty slot
     ar = np.arange(M)
-    for r in range(width):
-        left = remaining.sum(axis=1)
-        if not left.any():
-            break
-        if 2 * left.max() <= remaining.shape[1]:
-            # Drop the merged columns (the rest keep their heaviest-first order): the rounds get cheaper.
-            keep = np.argsort(~remaining, axis=1, kind="stable")[:, : left.max()]
-            w, remaining, label = (np.take_along_axis(a, keep, axis=1) for a in (w, remaining, label))
-            mean, a, A = (np.take_along_axis(x, keep[..., None], axis=1) for x in (mean, a, A))
-            cov = np.take_along_axis(cov, keep[..., None, None], axis=1)
-            c, a_norm, m_norm = (np.take_along_axis(x, keep, axis=1) for x in (c, a_norm, m_norm))
-        active = left > 0
-        j = np.argmax(np.where(remaining, w, -np.inf), axis=1)  # the heaviest remaining (first of equals)
-        mj = mean[ar, j]  # (M, n)
-        outer = (mj[:, :, None] * mj[:, None, :]).reshape(M, 1, n * n)
-        d2 = c - 2.0 * np.sum(a * mj[:, None, :], axis=-1) + np.sum(A * outer, axis=-1)
-        bound = rel_err * a_norm * (m_norm + m_norm[ar, j][:, None]) ** 2
-        near = remaining & (np.abs(d2 - merge) <= bound)
-        if near.any():  # rare: coordinates far larger than the spread
-            runs, cols = np.nonzero(near)
-            diff = mean[runs, cols] - mj[runs]
-            d2[runs, cols] = np.einsum("ki,kij,kj->k", diff, A[runs, cols].reshape(-1, n, n), diff)
-        group = remaining & (d2 <= merge)
-        group[ar, j] |= active  # j itself, at distance 0 whatever the rounding
-        gw = np.where(group, w, 0.0)
-        total = gw.sum(axis=1)
-        safe = np.where(active, total, 1.0)
-        m = np.matmul(gw[:, None, :], mean)[:, 0] / safe[:, None]
-        spread = mean - m[:, None, :]
-        S = np.matmul(gw[:, None, :], cov.reshape(M, -1, n * n))[:, 0].reshape(M, n, n)
-        S += np.matmul(np.swapaxes(spread * gw[..., None], 1, 2), spread)
-        out_w[:, r] = np.where(active, total, 0.0)
-        out_mean[:, r] = np.where(active[:, None], m, 0.0)
-        out_cov[:, r] = np.where(active[:, None, None], S / safe[:, None, None], np.eye(n))
-        out_label[:, r] = np.where(active, label[ar, j], -1)
+    while remaining.any():
+        j = np.argmax(remaining, axis=1)  # the first remaining is the heaviest; runs with none take no group
+        group = remaining & adj[ar, j]
+        centre = np.where(group, j[:, None], centre)
         remaining &= ~group
-    # The cap: the J_max heaviest.
-    J = min(cap, width)
+    return centre
+
+
+def _moment_match(
+    w: np.ndarray, mean: np.ndarray, cov: np.ndarray, label: np.ndarray, alive: np.ndarray, centre: np.ndarray, cap: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each group's moment-matched component, the label of its centre, the ``cap`` heaviest of each run."""
+    M, C = w.shape
+    n = mean.shape[-1]
+    # The members of each group together, heaviest first (stable), groups in the order of their centres.
+    perm = np.argsort(centre, axis=1, kind="stable")
+    sorted_centre = np.take_along_axis(centre, perm, axis=1)
+    runs, pos = np.nonzero(sorted_centre < C)
+    cols = perm[runs, pos]
+    group_of = sorted_centre[runs, pos]
+    first = np.ones(runs.size, dtype=bool)
+    first[1:] = (group_of[1:] != group_of[:-1]) | (runs[1:] != runs[:-1])
+    starts = np.flatnonzero(first)
+    g_run, g_centre = runs[starts], group_of[starts]
+    wi, mi, Pi = w[runs, cols], mean[runs, cols], cov[runs, cols]
+    total = np.add.reduceat(wi, starts)
+    m = np.add.reduceat(wi[:, None] * mi, starts, axis=0) / total[:, None]
+    spread = mi - m[np.cumsum(first) - 1]
+    wspread = wi[:, None] * spread
+    P = np.add.reduceat(wi[:, None, None] * Pi + wspread[:, :, None] * spread[:, None, :], starts, axis=0) / total[:, None, None]
+    # Into (M, G) slots, groups in the order of their centres (the order of the rounds), then the J_max heaviest.
+    count = np.bincount(g_run, minlength=M)
+    G = int(count.max(initial=0))
+    slot = np.arange(starts.size) - (np.cumsum(count) - count)[g_run]
+    out_w = np.zeros((M, G))
+    out_mean = np.zeros((M, G, n))
+    out_cov = np.broadcast_to(np.eye(n), (M, G, n, n)).copy()
+    out_label = np.full((M, G), -1, dtype=np.int64)
+    out_w[g_run, slot], out_mean[g_run, slot], out_cov[g_run, slot] = total, m, P
+    out_label[g_run, slot] = label[g_run, g_centre]
+    J = min(cap, G)
     order = np.argsort(-out_w, axis=1, kind="stable")[:, :J]
-    w = np.take_along_axis(out_w, order, axis=1)
-    used = int((w > 0).sum(axis=1).max(initial=0))
-    order = order[:, :used]
     return (
-        w[:, :used],
+        np.take_along_axis(out_w, order, axis=1),
         np.take_along_axis(out_mean, order[..., None], axis=1),
         np.take_along_axis(out_cov, order[..., None, None], axis=1),
         np.take_along_axis(out_label, order, axis=1),
