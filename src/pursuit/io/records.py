@@ -332,6 +332,8 @@ def read_csv(
 
 
 def _split_csv(text: str) -> list[str]:
+    if '"' not in text and "\r" not in text:  # no quoting and no stray newline: the csv module would split at the commas
+        return text.split(",")
     try:
         rows = list(csv.reader([text], strict=True))
     except csv.Error as e:
@@ -396,7 +398,10 @@ class _Columns:
         sensor = fields[self.sensor].strip()
         if not sensor:
             raise _Bad("sensor", "missing")
-        values = tuple(_parse_value_text(f, "value") for i, f in enumerate(fields) if i not in (self.time, self.sensor))
+        if self.time == 0 and self.sensor == 1:  # the usual layout: every field after them is a value
+            values = tuple([_parse_value_text(f, "value") for f in fields[2:]])
+        else:
+            values = tuple(_parse_value_text(f, "value") for i, f in enumerate(fields) if i not in (self.time, self.sensor))
         yield Record(lineno, time, sensor, values)
 
     def _wide(self, lineno: int, fields: list[str], clock: _Clock) -> Iterator[Record]:
