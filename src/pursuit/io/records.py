@@ -125,6 +125,10 @@ def _show(text: str, limit: int = 40) -> str:
 # --------------------------------------------------------------------------
 def _parse_time_text(text: str) -> float:
     t = text.strip()
+    if _NUMBER.match(t):  # the usual case first; the checks below name what else it is
+        v = float(t)
+        if math.isfinite(v):
+            return v
     if not t:
         raise _Bad("time", "missing")
     if t.lower() in _NAN:
@@ -141,6 +145,10 @@ def _parse_time_text(text: str) -> float:
 
 def _parse_value_text(text: str, field: str) -> float:
     t = text.strip()
+    if _NUMBER.match(t):  # the usual case first; the checks below name what else it is
+        v = float(t)
+        if math.isfinite(v):
+            return v
     if not t or t.lower() in _NAN:
         return math.nan
     if not _NUMBER.match(t):
@@ -206,6 +214,8 @@ class _Clock:
     def text(self, text: str, lineno: int) -> float:
         """A time from CSV text."""
         t = text.strip()
+        if self.kind == "number" and _NUMBER.match(t):  # the usual case: neither an ISO time nor the first time
+            return _parse_time_text(t)
         if _ISO_TIME.match(t):
             value = self._iso(t)
             self._agree("iso", lineno)

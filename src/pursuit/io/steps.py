@@ -193,6 +193,11 @@ def _too_far(rec: Record, line: int | None, reached: float | None, max_gap: floa
 
 def _make_step(records: list[Record], sensors: Mapping[str, object], m: int) -> Step:
     z = [math.nan] * m  # a list, then one array: cheaper than filling an array for a step of one or two records
+    if len(records) == 1:  # the usual step: one record, one line
+        r = records[0]
+        if r.sensor is not None:
+            z[sensors[r.sensor].block] = r.values
+        return Step(time=r.time, z=np.array(z, dtype=float), lines=(r.line,), sensors=() if r.sensor is None else (r.sensor,))
     for r in records:
         if r.sensor is not None:
             z[sensors[r.sensor].block] = r.values
