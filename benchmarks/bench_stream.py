@@ -102,8 +102,8 @@ with open(sys.argv[1]) as src, open(sys.argv[2], "w") as out:
 """
 
 
-def _measure(cmd: list[str], pin: bool) -> tuple[float, float]:
-    """Wall seconds and peak RSS (MiB) of one subprocess, run from a fresh helper process."""
+def _measure(cmd: list[str], pin: bool) -> tuple[float, float, float]:
+    """Wall seconds, peak RSS (MiB) and CPU seconds (user + system) of one subprocess, run from a fresh helper."""
     if pin and shutil.which("taskset"):
         cmd = ["taskset", "-c", "1", *cmd]
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
@@ -111,21 +111,22 @@ def _measure(cmd: list[str], pin: bool) -> tuple[float, float]:
     helper = (
         "import resource, subprocess, sys, time\n"
         "t = time.perf_counter(); rc = subprocess.call(sys.argv[1:]); dt = time.perf_counter() - t\n"
-        "print(rc, dt, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n"
+        "u = resource.getrusage(resource.RUSAGE_CHILDREN)\n"
+        "print(rc, dt, u.ru_maxrss, u.ru_utime + u.ru_stime)\n"
     )
     res = subprocess.run([sys.executable, "-c", helper, *cmd], env=env, capture_output=True, text=True, check=True)
-    rc, wall, rss_kib = res.stdout.split()
+    rc, wall, rss_kib, cpu = res.stdout.split()
     if rc != "0":
         raise RuntimeError(f"{' '.join(cmd)} exited {rc}")
-    return float(wall), int(rss_kib) / 1024
+    return float(wall), int(rss_kib) / 1024, float(cpu)
 
 
-def run_once(data: Path, model: Path, out: Path, pin: bool) -> tuple[float, float]:
-    """Wall seconds and peak RSS (MiB) of one ``pursuit track --stream``."""
+def run_once(data: Path, model: Path, out: Path, pin: bool) -> tuple[float, float, float]:
+    """Wall seconds, peak RSS (MiB) and CPU seconds of one ``pursuit track --stream``."""
     return _measure([sys.executable, "-m", "pursuit", "track", str(data), "--config", str(model), "--stream", "-o", str(out)], pin)
 
 
-def run_peer(data: Path, out: Path, pin: bool) -> tuple[float, float] | None:
+def run_peer(data: Path, out: Path, pin: bool) -> tuple[float, float, float] | None:
     """The same of the FilterPy loop, or None where FilterPy is not installed."""
     try:
         import filterpy  # noqa: F401
@@ -141,6 +142,7 @@ def main(argv: list[str] | None = None, quick: bool = False) -> None:
     ap.add_argument("--backends", nargs="+", default=["numpy", "numba"])
     ap.add_argument("--formats", nargs="+", default=["csv", "jsonl"])
     ap.add_argument("--no-pin", action="store_true", help="do not pin the child to core 1")
+    ap.add_argument("--no-peer", action="store_true", help="leave out the FilterPy loop")
     args = ap.parse_args(argv if argv is not None else [])
     os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(tempfile.gettempdir()) / "pursuit-bench-numba"))
     pin = not args.no_pin
@@ -155,35 +157,34 @@ def main(argv: list[str] | None = None, quick: bool = False) -> None:
             models[b] = folder / f"model-{b}.toml"
             models[b].write_text(MODEL.format(backend=b))
             run_once(start_inputs["csv"], models[b], small / "out.csv", pin)  # warms the numba cache: no compile measured
-            startup[b] = statistics.median(run_once(start_inputs["csv"], models[b], small / "out.csv", pin)[0] for _ in range(args.repeats))
+            startup[b] = _medians([run_once(start_inputs["csv"], models[b], small / "out.csv", pin) for _ in range(args.repeats)])
         print(
-            "Records/s = records / wall time of the whole command; *after start-up* subtracts the median time of the same "
-            "command on 100 records (interpreter, imports, model), which a long stream pays once. Peak RSS is the "
-            f"child's ru_maxrss. Medians of {args.repeats}; one core (`taskset -c 1`).\n"
+            "Records/s = records / time of the whole command: wall time, and CPU time (user + system) *after start-up*, "
+            "which subtracts the CPU time of the same command on 100 records (interpreter, imports, model: paid once by a "
+            "long stream); CPU time is the steadier figure on a shared machine. Peak RSS is the child's ru_maxrss. "
+            f"Medians of {args.repeats}; one core (`taskset -c 1`). The ratio is to the FilterPy loop's CPU rate after start-up.\n"
         )
-        print("| records | format | run | records/s | after start-up | vs FilterPy loop (after start-up) | peak RSS, MiB |")
-        print("|---|---|---|---|---|---|---|")
+        print("| records | format | run | records/s, wall | records/s, CPU after start-up | vs FilterPy loop | peak RSS, MiB |")
+        print("|---|---|---|---:|---:|---:|---:|")
         for n in args.records:
             inputs = write_inputs(folder, n)
             peer_rate = None
-            peer = [run_peer(inputs["csv"], folder / "peer.csv", pin) for _ in range(args.repeats)]
-            if peer[0] is not None:
-                peer_start = run_peer(start_inputs["csv"], small / "peer.csv", pin)[0]
-                wall = statistics.median(w for w, _ in peer)
-                peer_rate = n / max(wall - peer_start, 1e-9)
-                print(f"| {n:,} | csv | FilterPy loop (peer) | {n / wall:,.0f} | {peer_rate:,.0f} | 1 | {max(r for _, r in peer):.0f} |")
+            if not args.no_peer and run_peer(start_inputs["csv"], small / "peer.csv", pin) is not None:
+                peer_start = _medians([run_peer(start_inputs["csv"], small / "peer.csv", pin) for _ in range(args.repeats)])
+                peer = _medians([run_peer(inputs["csv"], folder / "peer.csv", pin) for _ in range(args.repeats)])
+                peer_rate = n / max(peer[2] - peer_start[2], 1e-9)
+                print(f"| {n:,} | csv | FilterPy loop (peer) | {n / peer[0]:,.0f} | {peer_rate:,.0f} | 1 | {peer[1]:.0f} |")
             for fmt in args.formats:
                 for b in args.backends:
-                    runs = [run_once(inputs[fmt], models[b], folder / f"out.{fmt}", pin) for _ in range(args.repeats)]
-                    wall = statistics.median(w for w, _ in runs)
-                    rate = n / max(wall - startup[b], 1e-9)
+                    wall, rss, cpu = _medians([run_once(inputs[fmt], models[b], folder / f"out.{fmt}", pin) for _ in range(args.repeats)])
+                    rate = n / max(cpu - startup[b][2], 1e-9)
                     ratio = f"{rate / peer_rate:.2f}" if peer_rate else "-"
-                    print(
-                        f"| {n:,} | {fmt} | pursuit track --stream, {b} | {n / wall:,.0f} | {rate:,.0f} | {ratio} "
-                        f"| {max(r for _, r in runs):.0f} |",
-                        flush=True,
-                    )
+                    print(f"| {n:,} | {fmt} | pursuit track --stream, {b} | {n / wall:,.0f} | {rate:,.0f} | {ratio} | {rss:.0f} |", flush=True)
 
+
+def _medians(runs: list[tuple[float, float, float]]) -> tuple[float, float, float]:
+    """Median wall and CPU seconds, and the largest peak RSS, of repeated runs."""
+    return statistics.median(r[0] for r in runs), max(r[1] for r in runs), statistics.median(r[2] for r in runs)
 
 if __name__ == "__main__":
     main(sys.argv[1:])

@@ -235,3 +235,28 @@ def test_streak_equals_the_divergence_monitor(seed):
     want = [bool(mon.update(nis[i : i + 1], dof[i : i + 1], mean, cov)[0]) for i in range(K)]
     assert got == want
     assert any(want) and not all(want)  # it was flagged during the run, not from the start
+
+
+# --------------------------------------------------------------------------
+# the benchmark's input
+# --------------------------------------------------------------------------
+def test_the_stream_benchmark_input_reads_without_a_bad_record(tmp_path):
+    import importlib.util
+    from pathlib import Path
+
+    from pursuit.io import load_track_model, read_records, track_records
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_stream.py"
+    spec = importlib.util.spec_from_file_location("bench_stream", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    inputs = bench.write_inputs(tmp_path, 300)
+    model_path = tmp_path / "model.toml"
+    model_path.write_text(bench.MODEL.format(backend="numpy"))
+    model = load_track_model(model_path)
+    results = {}
+    for fmt, data in inputs.items():
+        with open(data, "rb") as f:
+            results[fmt] = track_records(read_records(f, fmt), model)
+        assert not results[fmt].problems and len(results[fmt].estimates) == 300
+    assert [e.mean.tolist() for e in results["csv"].estimates] == [e.mean.tolist() for e in results["jsonl"].estimates]

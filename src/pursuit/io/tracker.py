@@ -180,7 +180,7 @@ class Tracker:
         calls of :meth:`update` (the filter's contract), so the estimates are those
         :meth:`update` would give; otherwise the caller steps the block.
         """
-        if self._sequence_off or self._flag_keys is None or not steps or not isinstance(self.state, GaussianState):
+        if self._sequence_off or self._flag_keys is None or self.time is None or not steps or not isinstance(self.state, GaussianState):
             return None
         times = np.fromiter((s.time for s in steps), dtype=float, count=len(steps))
         dts = np.diff(times, prepend=self.time)
@@ -191,8 +191,8 @@ class Tracker:
             start = dataclasses.replace(self.state, k=0)  # the model is time-invariant: k names no step in it
             with np.errstate(all="ignore"):
                 result = self.model.filter.run_sequence(start, zs, keep_cov=True)
-        except (TypeError, ArithmeticError, ValueError, np.linalg.LinAlgError):
-            result = None
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError):
+            return None  # this block's numbers: stepping it reports the step that breaks the filter
         if result is None:
             self._sequence_off = True  # it will not apply later either (the filter or its models)
             return None
