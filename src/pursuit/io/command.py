@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import BinaryIO, TextIO
 
 from .extras import Extras
+from .lines import ChunkedLines
 from .model import TrackModel, load_track_model
 from .output_file import same_file, same_file_as_stream, write_whole
 from .records import FORMATS, BadRecord, read_records
@@ -128,13 +129,14 @@ def run_track(args: argparse.Namespace, *, stdin: BinaryIO | None = None, stdout
         print(f"pursuit track: error: {args.data}: cannot read: {e.strerror or e}", file=stderr)
         return EXIT_BAD_INPUT
     try:
-        lines = iter(fh.readline, b"") if streaming else fh
+        # a stream is read in chunks of what has arrived (ChunkedLines), and filtered in blocks that end there
+        lines = ChunkedLines(fh) if streaming else fh
         # a stream's last line without its newline was cut off mid-write; a file's may just lack one
         records = extras.watch(
             read_records(lines, in_fmt, unterminated="reject" if streaming else "hint", layout=model.input)
         )
         if streaming:
-            code = _stream(records, model, args, out_fmt, policy, source, stdout, stderr, extras.sink)
+            code = _stream(records, model, args, out_fmt, policy, source, stdout, stderr, extras.sink, lines)
         else:
             code = _batch(records, model, args, out_fmt, policy, source, stdout, stderr, extras.sink)
         return extras.finish(stderr) if code == EXIT_OK else code
@@ -292,7 +294,7 @@ def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, st
 # --------------------------------------------------------------------------
 # stream: estimate by estimate
 # --------------------------------------------------------------------------
-def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, stderr, collected: list | None) -> int:
+def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, stderr, collected: list | None, lines: ChunkedLines) -> int:
     if args.output:
         try:
             out = open(args.output, "w", encoding="utf-8", newline="")
@@ -304,10 +306,12 @@ def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, s
     written = skipped = unused = 0
     try:
         guarded = _GuardedOutput(out)
-        writer = make_writer(out_fmt, guarded, model.state_labels, flush_each=True)
+        writer = make_writer(out_fmt, guarded, model.state_labels)
         writer.start()
         guarded.flush()
-        for event in stream_records(records, model, out_of_order=policy, stop_at_bad=not args.skip_bad):
+        # every estimate written is flushed before the input is waited for: as live as a flush per row
+        lines.before_wait = guarded.flush
+        for event in stream_records(records, model, out_of_order=policy, stop_at_bad=not args.skip_bad, ready=lines.ready):
             if isinstance(event, Estimate):
                 writer.write(event)
                 if collected is not None:  # only for --truth / --plot: a live stream may run for days
@@ -332,7 +336,11 @@ def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, s
                 )
                 return EXIT_BAD_INPUT
     finally:
-        if out is not stdout:
+        lines.before_wait = None
+        if out is stdout:
+            if sys.exc_info()[1] is None:  # not already failing (a broken pipe, a full disk)
+                guarded.flush()
+        else:
             try:
                 out.close()  # flushes what is buffered: it can fail too
             except OSError as e:

@@ -125,6 +125,10 @@ def _show(text: str, limit: int = 40) -> str:
 # --------------------------------------------------------------------------
 def _parse_time_text(text: str) -> float:
     t = text.strip()
+    if _NUMBER.match(t):  # the usual case first; the checks below name what else it is
+        v = float(t)
+        if math.isfinite(v):
+            return v
     if not t:
         raise _Bad("time", "missing")
     if t.lower() in _NAN:
@@ -141,6 +145,10 @@ def _parse_time_text(text: str) -> float:
 
 def _parse_value_text(text: str, field: str) -> float:
     t = text.strip()
+    if _NUMBER.match(t):  # the usual case first; the checks below name what else it is
+        v = float(t)
+        if math.isfinite(v):
+            return v
     if not t or t.lower() in _NAN:
         return math.nan
     if not _NUMBER.match(t):
@@ -206,6 +214,8 @@ class _Clock:
     def text(self, text: str, lineno: int) -> float:
         """A time from CSV text."""
         t = text.strip()
+        if self.kind == "number" and _NUMBER.match(t):  # the usual case: neither an ISO time nor the first time
+            return _parse_time_text(t)
         if _ISO_TIME.match(t):
             value = self._iso(t)
             self._agree("iso", lineno)
@@ -332,6 +342,8 @@ def read_csv(
 
 
 def _split_csv(text: str) -> list[str]:
+    if '"' not in text and "\r" not in text:  # no quoting and no stray newline: the csv module would split at the commas
+        return text.split(",")
     try:
         rows = list(csv.reader([text], strict=True))
     except csv.Error as e:
@@ -396,7 +408,10 @@ class _Columns:
         sensor = fields[self.sensor].strip()
         if not sensor:
             raise _Bad("sensor", "missing")
-        values = tuple(_parse_value_text(f, "value") for i, f in enumerate(fields) if i not in (self.time, self.sensor))
+        if self.time == 0 and self.sensor == 1:  # the usual layout: every field after them is a value
+            values = tuple([_parse_value_text(f, "value") for f in fields[2:]])
+        else:
+            values = tuple(_parse_value_text(f, "value") for i, f in enumerate(fields) if i not in (self.time, self.sensor))
         yield Record(lineno, time, sensor, values)
 
     def _wide(self, lineno: int, fields: list[str], clock: _Clock) -> Iterator[Record]:

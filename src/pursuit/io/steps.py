@@ -192,13 +192,18 @@ def _too_far(rec: Record, line: int | None, reached: float | None, max_gap: floa
 
 
 def _make_step(records: list[Record], sensors: Mapping[str, object], m: int) -> Step:
-    z = np.full(m, np.nan)
+    z = [math.nan] * m  # a list, then one array: cheaper than filling an array for a step of one or two records
+    if len(records) == 1:  # the usual step: one record, one line
+        r = records[0]
+        if r.sensor is not None:
+            z[sensors[r.sensor].block] = r.values
+        return Step(time=r.time, z=np.array(z, dtype=float), lines=(r.line,), sensors=() if r.sensor is None else (r.sensor,))
     for r in records:
         if r.sensor is not None:
             z[sensors[r.sensor].block] = r.values
     return Step(
         time=records[0].time,
-        z=z,
+        z=np.array(z, dtype=float),
         lines=tuple(dict.fromkeys(r.line for r in records)),  # a wide CSV row gives several records
         sensors=tuple(r.sensor for r in records if r.sensor is not None),
     )

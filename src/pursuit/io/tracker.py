@@ -19,19 +19,25 @@ end of the streak, not at its first step as in an experiment).
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from dataclasses import dataclass
-from typing import Iterable, Iterator
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from ..divergence import DIVERGED_KEY, DivergenceMonitor
+from ..divergence import DIVERGED_KEY, DivergenceTest
+from ..filters.gaussian import GaussianState
 from ..rng import RunStreams
 from .initiate import initiate
 from .model import TrackModel
 from .records import BadRecord, Record
 from .steps import Dropped, Step, assemble_steps, sort_records
 
-__all__ = ["Estimate", "Tracker", "StepRefused", "TrackResult", "track_records", "stream_records"]
+__all__ = ["Estimate", "Tracker", "StepRefused", "TrackResult", "track_records", "stream_records", "BLOCK_STEPS"]
+
+BLOCK_STEPS = 4096
+"""The most steps :func:`stream_records` filters in one block (one compiled call where the filter has one)."""
 
 
 @dataclass(frozen=True)
@@ -102,7 +108,9 @@ class Tracker:
         self.state = model.filter.init(model.prior, batch=(1,), rng=rng)
         self.time = model.prior_time
         self.k = 0
-        self.monitor = DivergenceMonitor((1,))
+        self.monitor = _Streak(DivergenceTest())
+        self._flag_keys: tuple[str, ...] | None = None  # the boolean info keys of a step, in the step's order
+        self._sequence_off = not getattr(model.filter, "compiled", False)
 
     def _try(self, z: np.ndarray, dt: float):
         """One filter step from the current state: ``(problem, state, info, mean, var)``, problem '' if healthy."""
@@ -145,21 +153,98 @@ class Tracker:
             raise StepRefused(f"updating with this step's measurements would break the filter (dt = {dt:g} s): {problem}", "record")
         self.state, self.time, self.k = state, step.time, self.k + 1
         dof = int(np.asarray(info["dof"]).reshape(-1)[0])
+        self._flag_keys = tuple(key for key, value in info.items() if np.asarray(value).dtype == bool)
         flags = [key for key, value in info.items() if _true_flag(value)]
+        nis = float(np.asarray(info["nis"]).reshape(-1)[0])
+        return self._estimate(step, mean, var, np.asarray(state.cov, dtype=float)[0], nis, dof, flags)
+
+    def _estimate(self, step: Step, mean, var, cov, nis: float, dof: int, flags: list[str]) -> Estimate:
         if dof == 0:
             flags.append("predict")
-        if self.monitor.update(info.get("nis"), info.get("dof"), state.mean, state.cov)[0] and DIVERGED_KEY not in flags:
+        if self.monitor.update(nis, dof) and DIVERGED_KEY not in flags:
             flags.append(DIVERGED_KEY)
-        return Estimate(
-            time=step.time,
-            mean=mean,
-            var=var,
-            nis=float(np.asarray(info["nis"]).reshape(-1)[0]),
-            dof=dof,
-            flags=tuple(flags),
-            lines=step.lines,
-            cov=np.asarray(state.cov, dtype=float)[0],
-        )
+        return Estimate(time=step.time, mean=mean, var=var, nis=nis, dof=dof, flags=tuple(flags), lines=step.lines, cov=cov)
+
+    @property
+    def needs_step(self) -> bool:
+        """Whether :meth:`update_sequence` needs a step by :meth:`update` first (to learn the filter's flags)."""
+        return self._flag_keys is None and not self._sequence_off
+
+    def update_sequence(self, steps: list[Step]) -> list[Estimate] | None:
+        """Advance over ``steps`` in one compiled call, or None (nothing changed) where that does not apply.
+
+        Applies to a compiled filter whose :meth:`~pursuit.filters.base.FilterBase.run_sequence`
+        runs from the current state (a KF/EKF with a time-invariant linear motion and no
+        gate), when every step comes the model's ``dt`` after the one before it and the
+        whole block is healthy.  The compiled sequence gives the bits of ``len(steps)``
+        calls of :meth:`update` (the filter's contract), so the estimates are those
+        :meth:`update` would give; otherwise the caller steps the block.
+        """
+        if self._sequence_off or self._flag_keys is None or self.time is None or not steps or not isinstance(self.state, GaussianState):
+            return None
+        times = np.fromiter((s.time for s in steps), dtype=float, count=len(steps))
+        dts = np.diff(times, prepend=self.time)
+        if not np.all(dts == self.model.dt) or getattr(self.state, "memory", None) is not None:
+            return None  # irregular sampling: the motion differs per step, which the sequence cannot take
+        zs = np.stack([s.z for s in steps])[:, None, :]
+        try:
+            start = dataclasses.replace(self.state, k=0)  # the model is time-invariant: k names no step in it
+            with np.errstate(all="ignore"):
+                result = self.model.filter.run_sequence(start, zs, keep_cov=True)
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError):
+            return None  # this block's numbers: stepping it reports the step that breaks the filter
+        if result is None:
+            self._sequence_off = True  # it will not apply later either (the filter or its models)
+            return None
+        means, covs, info = result
+        if any(key not in info for key in self._flag_keys):
+            self._sequence_off = True
+            return None
+        means, covs = means[:, 0], covs[:, 0]
+        var = np.diagonal(covs, axis1=1, axis2=2)
+        nis = np.asarray(info["nis"], dtype=float).reshape(len(steps))
+        with np.errstate(invalid="ignore"):
+            healthy = np.all(np.isfinite(means)) and np.all(np.isfinite(covs)) and np.all(var > 0) and not np.any(nis < 0)
+        if not healthy:
+            return None  # the caller steps the block and refuses the steps that break the filter
+        dof = np.asarray(info["dof"]).reshape(len(steps)).tolist()
+        flag_rows = [np.asarray(info[key]).reshape(len(steps)).tolist() for key in self._flag_keys]
+        out = []
+        for i, step in enumerate(steps):
+            flags = [key for key, row in zip(self._flag_keys, flag_rows) if row[i]]
+            out.append(self._estimate(step, means[i], var[i].copy(), covs[i], float(nis[i]), int(dof[i]), flags))
+        self.state = dataclasses.replace(self.state, mean=means[-1:].copy(), cov=covs[-1:].copy(), k=self.k + len(steps))
+        self.time, self.k = steps[-1].time, self.k + len(steps)
+        return out
+
+
+class _Streak:
+    """The consistency test of :class:`pursuit.divergence.DivergenceMonitor` for one run, in Python scalars.
+
+    The tracker refuses every step whose estimate is not finite, so only the
+    NIS streak applies; this is the monitor's arithmetic for a batch of one,
+    without an array operation per step.
+    """
+
+    def __init__(self, test: DivergenceTest):
+        self.test = test
+        self.length = 0
+        self.flagged = False
+        self._thresholds: dict[int, float] = {}
+
+    def update(self, nis: float, dof: int) -> bool:
+        """Take one accepted step's NIS and measured dimension; whether the run is flagged after it."""
+        if dof > 0 and not math.isnan(nis):
+            limit = self._thresholds.get(dof)
+            if limit is None:
+                limit = self._thresholds[dof] = float(self.test.thresholds(np.asarray([float(dof)]))[0])
+            if not nis <= limit:  # +inf exceeds
+                self.length += 1
+            else:
+                self.length = 0
+        if self.length >= self.test.streak:
+            self.flagged = True
+        return self.flagged
 
 
 def _initiation_estimate(step: Step, g, flags: tuple[str, ...]) -> Estimate:
@@ -233,8 +318,33 @@ def track_records(items: Iterable[Record | BadRecord], model: TrackModel, *, out
     return result
 
 
+def _filter_block(tracker: Tracker, block: list[Step], stop_at_bad: bool) -> Iterator[Estimate | BadRecord]:
+    """Filter a block of steps (in one compiled call where that applies); returns True when a refusal stops the input."""
+    first = 1 if tracker.needs_step else 0  # one step by update() first tells which info keys are flags
+    estimates = None
+    for i, step in enumerate(block):
+        if i == first:
+            estimates = tracker.update_sequence(block[i:])
+            if estimates is not None:
+                break
+        try:
+            yield tracker.update(step)
+        except StepRefused as e:
+            yield from _refused(step, e)
+            if stop_at_bad:
+                return True
+    if estimates is not None:
+        yield from estimates
+    return False
+
+
 def stream_records(
-    items: Iterable[Record | BadRecord], model: TrackModel, *, out_of_order: str = "drop", stop_at_bad: bool = False
+    items: Iterable[Record | BadRecord],
+    model: TrackModel,
+    *,
+    out_of_order: str = "drop",
+    stop_at_bad: bool = False,
+    ready: Callable[[], bool] | None = None,
 ) -> Iterator[Estimate | BadRecord | Dropped]:
     """Run the model's filter over records as they arrive.
 
@@ -245,6 +355,13 @@ def stream_records(
     per line of the step and the filter goes on from its previous state.
     With ``stop_at_bad`` the input ends at the first bad record: the
     records before it are filtered, then the bad record is yielded last.
+
+    Complete steps are filtered in blocks of up to :data:`BLOCK_STEPS` (one
+    compiled call where :meth:`Tracker.update_sequence` applies, else step by
+    step; the estimates are the same either way).  ``ready`` says whether the
+    input has more lines at hand without waiting (a live stream); a block ends
+    as soon as it says no, so no estimate waits for a record that has not
+    arrived.  None: the input never waits (a list, a file).
     """
     policy = "error" if out_of_order == "sort" else out_of_order
     steps = assemble_steps(
@@ -261,13 +378,21 @@ def stream_records(
         if model is None:
             return
     tracker = Tracker(model)
-    for event in steps:
+    block: list[Step] = []
+    while True:
+        event = next(steps, None) if not block or ready is None or ready() else None
         if isinstance(event, Step):
-            try:
-                yield tracker.update(event)
-            except StepRefused as e:
-                yield from _refused(event, e)
-                if stop_at_bad:
-                    return
-        else:
-            yield event
+            block.append(event)
+            if len(block) < BLOCK_STEPS:
+                continue
+            event = None
+        if block:  # the block is full, the input would wait, or another kind of event comes next
+            stopped = yield from _filter_block(tracker, block, stop_at_bad)
+            if stopped:
+                return
+            block = []
+            if event is None:
+                continue
+        if event is None:
+            return
+        yield event

@@ -57,8 +57,9 @@ class CsvEstimateWriter(EstimateWriter):
         self._started = True
 
     def _format(self, est: Estimate) -> str:
-        nums = [est.time, *est.mean.tolist(), *est.var.tolist(), est.nis]
-        return ",".join([*(repr(float(v)) for v in nums), str(est.dof), ";".join(est.flags)]) + "\n"
+        # tolist() gives Python floats, whose repr is the shortest round-trip text (NumPy scalars print otherwise)
+        nums = [float(est.time), *est.mean.tolist(), *est.var.tolist(), float(est.nis)]
+        return ",".join([*map(repr, nums), str(est.dof), ";".join(est.flags)]) + "\n"
 
 
 class JsonlEstimateWriter(EstimateWriter):
