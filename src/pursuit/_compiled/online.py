@@ -26,8 +26,9 @@ one run needs:
 A KF/EKF with a linear measurement runs the generated kernel ``one``
 (:mod:`pursuit._compiled.kf_codegen`), written from the same body as the
 batched ``step`` kernel, so both give the same bits; other measurements and
-the UKF/CKF run the serial block kernel of the batched path on one lane,
-the same kernel.  Where the lane does not apply (a moving observer, a motion
+the UKF/CKF run :func:`pursuit._compiled.gauss_kernels.ekf_one` /
+``sigma_one``, which call the serial block kernel of the batched path on one
+lane (the same kernel) with its outputs as views of one vector.  Where the lane does not apply (a moving observer, a motion
 model that changes with the step, a run whose covariance needs the NumPy
 repair, a batch other than ``()`` or ``(1,)``) it returns ``None`` and the
 filter takes its batched compiled step.
@@ -40,12 +41,12 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from .._validation import MAX_MEASUREMENT, measurement_for_step, no_infinite_measurement, time_step
+from .._validation import measurement_for_step, no_infinite_measurement, time_step
 from ..filters.gating import gate_exceeded, keep_prediction
 from ..filters.gaussian import GaussianState
 from . import gauss_kernels as GK
 from . import generated, kf_codegen
-from .kernel_args import GaussOutputs, Prediction, SigmaPoints
+from .kernel_args import Prediction, SigmaPoints
 from .specs import LINEAR, M_LINEAR
 
 __all__ = ["StepInfo", "online_lane", "INFO_KEYS"]
@@ -123,12 +124,6 @@ class StepInfo(MutableMapping):
         return f"StepInfo({dict(self)!r})"
 
 
-def _entry_point(kernel, args: tuple) -> Callable:
-    """Call ``kernel`` through its dispatcher once (compiling or loading it), then return the entry point of that overload."""
-    kernel(*args)
-    return kernel.overloads[tuple(kernel.typeof_pyval(a) for a in args)].entry_point
-
-
 def _vector(z: Any, m: int, batch: tuple[int, ...], k: int) -> np.ndarray:
     """``z`` as a writable float64 C vector ``(m,)``, through the NumPy step's checks (shape, infinities)."""
     z = measurement_for_step(z, batch, m, k)
@@ -136,20 +131,32 @@ def _vector(z: Any, m: int, batch: tuple[int, ...], k: int) -> np.ndarray:
 
 
 class _Lane:
-    """What both lanes share: the run's arrays from the state, the packed model per dt, the gate."""
+    """One run's step: the kernel ``kernel(x (n,), P (n, n), z (m,), *model, out) -> 0 | 1`` and the Python around it.
 
-    def __init__(self, filt, specs):
-        self.filt = filt
+    ``out`` is one fresh vector per step with the rows of
+    :func:`pursuit._compiled.kf_codegen.step_rows`; the returned state and
+    the info are views of it.  ``model`` is packed once per distinct ``dt``.
+    """
+
+    def __init__(self, filt, specs, n: int, kernel, pack: Callable):
         self.ms, self.hs = specs
-        self.m = self.hs.dim
+        self.n, self.m = n, self.hs.dim
         self.lam = float(filt.fading.lam)
         self.gate = filt.gate
-        self.last: tuple | None = None  # (state returned by the last step, its x, its P) as the kernel takes them
-        self.models: dict[float | None, Any] = {}
+        self.kernel, self.pack = kernel, pack
+        self.call: Callable | None = None
+        self.last: tuple | None = None  # (the state the last step returned, its x, its P, its batch)
+        self.models: dict[float | None, tuple | None] = {}
+        rows = kf_codegen.step_rows(n, self.m)
+        self.rows = rows
+        self.size = sum(c for _, c in rows.values())
+        self.px = rows["P"][0]
+        self.ok_row = rows["ok"][0]
 
-    def model(self, dt: float | None) -> Any:
-        packed = self.models.get(dt)
-        if packed is None:
+    def model(self, dt: float | None) -> tuple | None:
+        """The kernel's model arguments at ``dt`` (None: the motion model's own), or None where the lane does not apply."""
+        packed = self.models.get(dt, _MISSING)
+        if packed is _MISSING:
             if len(self.models) >= _MAX_DT_CACHE:
                 self.models.clear()
             F, _, _ = self.ms.arrays(1, dt)
@@ -168,43 +175,7 @@ class _Lane:
             return None
         if cov.shape[-2:] != (n, n) or cov.size != n * n:
             return None
-        return self.own(np.array(mean.reshape(n), dtype=float), np.array(cov.reshape(n, n), dtype=float)), batch
-
-    def gated(self, nis: float, dof: int, xp, Pp, mean, cov, batch):
-        """The χ² gate of the batched step (:func:`pursuit.filters.gating.apply_gate`) on one run."""
-        mask = gate_exceeded(self.gate, np.array([nis]), np.array([dof], dtype=np.int64), self.m)
-        if not mask[0]:
-            return mean, cov, False
-        n = self.n
-        new_mean, new_cov = keep_prediction(mask, xp.reshape(1, n), Pp.reshape(1, n, n), mean.reshape(1, n), cov.reshape(1, n, n))
-        return new_mean.reshape(batch + (n,)), new_cov.reshape(batch + (n, n)), True
-
-
-class _LinearLane(_Lane):
-    """KF/EKF with a linear measurement: the generated kernel ``one`` (the body of the batched ``step`` kernel)."""
-
-    def __init__(self, filt, specs, F, Q):
-        super().__init__(filt, specs)
-        hs = self.hs
-        self.A, self.R = np.ascontiguousarray(hs.A), np.ascontiguousarray(hs.R)
-        self.key = kf_codegen.structure_key(F, Q, self.A, self.R)
-        self.gen = generated.linear_kf_kernels(F, Q, self.A, self.R)
-        n, m = F.shape[0], self.m
-        self.n = n
-        rows = kf_codegen.step_rows(n, m)
-        self.rows = rows
-        self.size = sum(c for _, c in rows.values())
-        self.px = rows["P"][0]
-        self.nis_row, self.dof_row, self.ok_row, self.ll_row = rows["nis"][0], rows["dof"][0], rows["ok"][0], rows["loglik"][0]
-        self.call = None
-
-    def pack(self, F, Q):
-        if kf_codegen.structure_key(F, Q, self.A, self.R) != self.key:
-            return None  # another zero pattern at this dt: the batched step picks its kernel
-        return kf_codegen.one_constants(F, Q, self.A, self.R, self.lam)
-
-    def own(self, x, P):
-        return x, P
+        return np.array(mean.reshape(n), dtype=float), np.array(cov.reshape(n, n), dtype=float), batch
 
     def __call__(self, state: GaussianState, z: Any, k: int | None, dt: Any):
         k = state.k + 1 if k is None else int(k)
@@ -215,39 +186,32 @@ class _LinearLane(_Lane):
             got = self.start(state)
             if got is None:
                 return None
-            (x, P), batch = got
-        if dt is None:
-            c = self.models.get(None)
-            if c is None:
-                c = self.model(None)
-        else:
-            c = self.model(time_step(dt, k))
-        if c is None:
-            return None
+            x, P, batch = got
+        model = self.models.get(None) if dt is None else None
+        if model is None:
+            model = self.model(None if dt is None else time_step(dt, k))
+            if model is None:
+                return None
         m = self.m
         if not (type(z) is np.ndarray and z.dtype is _F64 and z.flags.carray and (z.shape == (m,) or (batch and z.shape == (1, m)))):
             z = _vector(z, m, batch, k)
         elif z.ndim == 2:
             z = z[0]
-        n = self.n
         out = np.empty(self.size)
         call = self.call
-        if call is None:
-            call = self.call = _entry_point(self.gen.one, (x, P, z, c, out))
-        if call(x, P, z, c, out):
+        if call is None:  # the first step: through the dispatcher (compiles or loads), then its entry point
+            self.kernel(x, P, z, *model, out)
+            call = self.call = self.kernel.overloads[tuple(self.kernel.typeof_pyval(a) for a in (x, P, z, *model, out))].entry_point
+        if call(x, P, z, *model, out):
             no_infinite_measurement(z, k)  # raises, naming the step
         if out[self.ok_row] == 0.0:
-            return None  # S does not factor: the batched step repairs it with NumPy
+            return None  # a covariance does not factor: the batched step repairs it with NumPy
+        n = self.n
         x_new = out[:n]
         P_new = out[self.px:self.px + n * n].reshape(n, n)
         gated = False
         if self.gate is not None:
-            xp0 = self.rows["xp"][0]
-            pp0 = self.rows["Pp"][0]
-            mean, cov, gated = self.gated(out[self.nis_row], int(out[self.dof_row]), out[xp0:xp0 + n],
-                                          out[pp0:pp0 + n * n], x_new, P_new, batch)
-            if gated:
-                x_new, P_new = np.ascontiguousarray(mean.reshape(n)), np.ascontiguousarray(cov.reshape(n, n))
+            x_new, P_new, gated = self.gated(out, x_new, P_new)
         if batch:
             new = _new_state(x_new.reshape(1, n), P_new.reshape(1, n, n), k)
         else:
@@ -255,106 +219,42 @@ class _LinearLane(_Lane):
         self.last = (new, x_new, P_new, batch)
         return new, StepInfo(self, out, batch, gated)
 
+    def gated(self, out: np.ndarray, x_new: np.ndarray, P_new: np.ndarray):
+        """The χ² gate of the batched step (:func:`pursuit.filters.gating.apply_gate`) on one run."""
+        rows, n = self.rows, self.n
+        nis, dof = out[rows["nis"][0]], int(out[rows["dof"][0]])
+        mask = gate_exceeded(self.gate, np.array([nis]), np.array([dof], dtype=np.int64), self.m)
+        if not mask[0]:
+            return x_new, P_new, False
+        xp0, pp0 = rows["xp"][0], rows["Pp"][0]
+        mean, cov = keep_prediction(mask, out[xp0:xp0 + n].reshape(1, n), out[pp0:pp0 + n * n].reshape(1, n, n),
+                                    x_new.reshape(1, n), P_new.reshape(1, n, n))
+        return np.ascontiguousarray(mean.reshape(n)), np.ascontiguousarray(cov.reshape(n, n)), True
+
     def info_value(self, key: str, out: np.ndarray, batch: tuple[int, ...], gated: bool) -> np.ndarray:
+        """One info value of a step whose output is ``out``, shaped as the batched step's for ``batch``."""
         n, m = self.n, self.m
-        core = {"innovation": (m,), "S": (m, m), "pred_mean": (n,), "pred_cov": (n, n), "cross_cov": (n, n)}
-        name = {"innovation": "innov", "S": "S", "pred_mean": "xp", "pred_cov": "Pp", "cross_cov": "cross"}.get(key)
+        name, core = _INFO_ROWS.get(key, (None, None))
         if name is not None:
             first, count = self.rows[name]
-            return out[first:first + count].reshape(batch + core[key])
-        if key in ("nis", "loglik"):
-            first = self.rows[key][0]
-            return out[first:first + 1].reshape(batch)
-        if key == "dof":
-            return out[self.dof_row:self.dof_row + 1].astype(np.int64).reshape(batch)
-        return _constant_info(key, self.lam, batch, gated)
+            shape = tuple(n if c == "n" else m for c in core)
+            value = out[first:first + count].reshape(batch + shape)
+            return value.astype(np.int64) if key == "dof" else value
+        if key == "fading":
+            return np.full(batch, self.lam)
+        if key == "faded":
+            return np.full(batch, self.lam > 1.0)
+        if key == "repaired":
+            return np.zeros(batch, dtype=bool)
+        if key == "gated":
+            return np.full(batch, gated)
+        raise KeyError(key)
 
 
-def _constant_info(key: str, lam: float, batch: tuple[int, ...], gated: bool) -> np.ndarray:
-    """The info values that do not come from the kernel's output."""
-    if key == "fading":
-        return np.full(batch, lam)
-    if key == "faded":
-        return np.full(batch, lam > 1.0)
-    if key == "repaired":
-        return np.zeros(batch, dtype=bool)
-    if key == "gated":
-        return np.full(batch, gated)
-    raise KeyError(key)
-
-
-class _BlockLane(_Lane):
-    """Nonlinear EKF and UKF/CKF: the serial block kernel of the batched step on one lane."""
-
-    def __init__(self, filt, specs, kind: str, n: int):
-        super().__init__(filt, specs)
-        self.n = n
-        self.sensor = self.hs.kernel_args(1)
-        if kind == "ekf":
-            self.kernel, self.extra = GK.ekf_step_serial, ()
-        else:
-            cscale, wm, wc = filt.sigma_weights(n)
-            sigma = SigmaPoints(float(cscale), np.ascontiguousarray(wm), np.ascontiguousarray(wc), wm.shape[0] % 2 == 1)
-            self.kernel, self.extra = GK.sigma_step_serial, (sigma,)
-        self.call = None
-
-    def pack(self, F, Q):
-        return Prediction(F, Q, self.lam)
-
-    def own(self, x, P):
-        n = self.n
-        return x.reshape(n, 1), P.reshape(n, n, 1)
-
-    def __call__(self, state: GaussianState, z: Any, k: int | None, dt: Any):
-        k = state.k + 1 if k is None else int(k)
-        last = self.last
-        if last is not None and last[0] is state:
-            x, P, batch = last[1], last[2], last[3]
-        else:
-            got = self.start(state)
-            if got is None:
-                return None
-            (x, P), batch = got
-        pred = self.model(None if dt is None else time_step(dt, k))
-        m, n = self.m, self.n
-        if not (type(z) is np.ndarray and z.dtype is _F64 and z.flags.carray and (z.shape == (m,) or (batch and z.shape == (1, m)))):
-            z = _vector(z, m, batch, k)
-        else:
-            for v in z.tolist() if z.ndim == 1 else z[0].tolist():
-                if abs(v) > MAX_MEASUREMENT:  # an infinity too; NaN (missing) compares False
-                    no_infinite_measurement(z, k)  # raises, naming the step
-        zl = z.reshape(m, 1)
-        outs = GaussOutputs(np.empty((n, 1)), np.empty((n, n, 1)), np.empty((n, 1)), np.empty((n, n, 1)), np.empty((n, n, 1)),
-                            np.empty((m, 1)), np.empty((m, m, 1)), np.empty(1), np.empty(1, dtype=np.int64), np.empty(1),
-                            np.ones(1, dtype=np.bool_))
-        args = ((x, P), (zl, zl == zl), pred, self.sensor) + self.extra + (outs,)
-        call = self.call
-        if call is None:
-            call = self.call = _entry_point(self.kernel, args)
-        else:
-            call(*args)
-        if not outs.ok[0]:
-            return None
-        x_new, P_new = outs.x, outs.P
-        gated = False
-        if self.gate is not None:
-            mean, cov, gated = self.gated(outs.nis[0], int(outs.dof[0]), outs.xp, outs.Pp, x_new, P_new, batch)
-            if gated:
-                x_new, P_new = np.ascontiguousarray(mean.reshape(n, 1)), np.ascontiguousarray(cov.reshape(n, n, 1))
-        shape = batch + (n,)
-        new = _new_state(x_new.reshape(shape), P_new.reshape(shape + (n,)), k)
-        self.last = (new, x_new, P_new, batch)
-        return new, StepInfo(self, outs, batch, gated)
-
-    def info_value(self, key: str, outs: GaussOutputs, batch: tuple[int, ...], gated: bool) -> np.ndarray:
-        n, m = self.n, self.m
-        arrays = {"innovation": (outs.innov, (m,)), "S": (outs.S, (m, m)), "pred_mean": (outs.xp, (n,)),
-                  "pred_cov": (outs.Pp, (n, n)), "cross_cov": (outs.cross, (n, n)), "nis": (outs.nis, ()),
-                  "dof": (outs.dof, ()), "loglik": (outs.loglik, ())}
-        if key in arrays:
-            a, core = arrays[key]
-            return a.reshape(batch + core)
-        return _constant_info(key, self.lam, batch, gated)
+_MISSING = object()
+#: info key -> (row name in step_rows, core shape in n and m)
+_INFO_ROWS = {"innovation": ("innov", "m"), "S": ("S", "mm"), "nis": ("nis", ""), "dof": ("dof", ""),
+              "loglik": ("loglik", ""), "pred_mean": ("xp", "n"), "pred_cov": ("Pp", "nn"), "cross_cov": ("cross", "nn")}
 
 
 def online_lane(filt, specs, kind: str) -> Callable | None:
@@ -374,6 +274,21 @@ def online_lane(filt, specs, kind: str) -> Callable | None:
     if not (np.array_equal(F, F2) and np.array_equal(Q, ms.cov(2, None))):
         return None
     F = np.ascontiguousarray(F)
+    n = F.shape[0]
+    lam = float(filt.fading.lam)
     if kind == "ekf" and hs.kind == M_LINEAR:
-        return _LinearLane(filt, specs, F, Q)
-    return _BlockLane(filt, specs, kind, F.shape[0])
+        A, R = np.ascontiguousarray(hs.A), np.ascontiguousarray(hs.R)
+        key = kf_codegen.structure_key(F, Q, A, R)
+
+        def pack(F, Q):
+            if kf_codegen.structure_key(F, Q, A, R) != key:
+                return None  # another zero pattern at this dt: the batched step picks its kernel
+            return (kf_codegen.one_constants(F, Q, A, R, lam),)
+
+        return _Lane(filt, specs, n, generated.linear_kf_kernels(F, Q, A, R).one, pack)
+    sensor = hs.kernel_args(1)
+    if kind == "ekf":
+        return _Lane(filt, specs, n, GK.ekf_one, lambda F, Q: (Prediction(F, Q, lam), sensor))
+    cscale, wm, wc = filt.sigma_weights(n)
+    sigma = SigmaPoints(float(cscale), np.ascontiguousarray(wm), np.ascontiguousarray(wc), wm.shape[0] % 2 == 1)
+    return _Lane(filt, specs, n, GK.sigma_one, lambda F, Q: (Prediction(F, Q, lam), sensor, sigma))
