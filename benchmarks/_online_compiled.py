@@ -131,7 +131,53 @@ def filterpy_rows(steps: int = 2000, repeat: int = 5) -> list[tuple[str, str, fl
     return [("KF", "FilterPy", _per_step(kf, steps, repeat)), ("UKF (range-bearing)", "FilterPy", _per_step(ukf, steps, repeat))]
 
 
+def floor_rows(steps: int = 20000, repeat: int = 5) -> list[tuple[str, float]]:
+    """``(piece, µs)``: where one compiled KF step's time goes (the lane's own pieces, timed alone in this process)."""
+    from pursuit._compiled.online import StepInfo, _new_state
+
+    motion = _motion()
+    lin = LinearGaussian.position(4, motion.position_indices, 1.0)
+    filt = pu.KalmanFilter(motion, lin, backend="numba")
+    prior = pu.Gaussian(np.array([0.0, 1.0, 0.0, 0.5]), np.diag([10.0, 1.0, 10.0, 1.0]))
+    s0 = filt.init(prior)
+    z = np.array([1.0, 0.5])
+    s1, _ = filt.step(s0, z)
+    lane = vars(filt)["_online_lane"]
+    x, P = s1.mean, s1.cov
+    (c,) = lane.model(None)
+    out = np.empty(lane.size)
+    call, kernel = lane.call, lane.kernel
+    a = np.zeros(4)
+
+    def loop(fn):
+        def go():
+            for _ in range(steps):
+                fn()
+        return go
+
+    chain = [s1]
+
+    def full():  # chained, as a tracking loop steps: the lane recognises its own last state
+        chain[0] = filt.step(chain[0], z)[0]
+
+    pieces = [
+        ("whole step: state = filt.step(state, z)[0]", full),
+        ("kernel through numba's dispatcher (5 arguments)", lambda: kernel(x, P, z, c, out)),
+        ("kernel through its entry point (what the lane calls)", lambda: call(x, P, z, c, out)),
+        ("np.empty of the output vector", lambda: np.empty(lane.size)),
+        ("state: two views and the GaussianState", lambda: _new_state(out[:4], out[8:24].reshape(4, 4), 1)),
+        ("info: StepInfo (lazy; nothing sliced)", lambda: StepInfo(lane, out, (), False)),
+        ("reference: a + a on a 4-vector (NumPy ufunc call)", lambda: a + a),
+    ]
+    return [(name, _per_step(loop(fn), steps, repeat)) for name, fn in pieces]
+
+
 def main() -> None:
+    print("| piece of one compiled KF step | µs |")
+    print("|---|---|")
+    for name, t in floor_rows():
+        print(f"| {name} | {t:.3f} |")
+    print()
     ours = rows()
     peer = {name: t for name, _, t in filterpy_rows()}
     print("| filter | backend | µs per step | FilterPy µs per step | vs FilterPy |")
