@@ -31,6 +31,7 @@ import numpy as np
 from numba import njit, prange
 
 from .common import LOG_2PI, serial_and_parallel, wrap
+from .kernel_args import GaussOutputs
 from .model_math import h_row, jac_row, wraps
 
 BLOCK = 512
@@ -735,3 +736,66 @@ ekf_step_serial, ekf_step_parallel = serial_and_parallel(_ekf_step, **_NJ)
 ekf_sequence_serial, ekf_sequence_parallel = serial_and_parallel(_ekf_sequence, **_NJ)
 sigma_step_serial, sigma_step_parallel = serial_and_parallel(_sigma_step, **_NJ)
 correct_serial, correct_parallel = serial_and_parallel(_correct_only, **_NJ)
+
+
+# --------------------------------------------------------------------------
+# one run stepped from Python (pursuit._compiled.online)
+# --------------------------------------------------------------------------
+_MAX_Z = 2.0**500  # pursuit._validation.MAX_MEASUREMENT
+
+
+@njit(**_NJ)
+def _one_setup(x, P, z, out):
+    """The lane-major views of one run for the step kernels, and the outputs as views of ``out``.
+
+    ``out`` has the rows of :func:`pursuit._compiled.kf_codegen.step_rows`
+    (x, xp, P, Pp, cross, innov, S, nis, loglik, dof, ok), one lane; ``dof``
+    and ``ok`` are written by :func:`_one_finish`.  Returns None for a ``z``
+    with an infinity or a value beyond ±2⁵⁰⁰.
+    """
+    n = x.shape[0]
+    m = z.shape[0]
+    nn = n * n
+    zl = np.empty((m, 1))
+    valid = np.empty((m, 1), dtype=np.bool_)
+    bad = False
+    for a in range(m):
+        zl[a, 0] = z[a]
+        valid[a, 0] = not np.isnan(z[a])
+        bad = bad or abs(z[a]) > _MAX_Z
+    o = 2 * n + 3 * nn
+    outs = GaussOutputs(out[0:n].reshape((n, 1)), out[2 * n:2 * n + nn].reshape((n, n, 1)), out[n:2 * n].reshape((n, 1)),
+                        out[2 * n + nn:2 * n + 2 * nn].reshape((n, n, 1)), out[2 * n + 2 * nn:o].reshape((n, n, 1)),
+                        out[o:o + m].reshape((m, 1)), out[o + m:o + m + m * m].reshape((m, m, 1)),
+                        out[o + m + m * m:o + m + m * m + 1], np.empty(1, dtype=np.int64),
+                        out[o + m + m * m + 1:o + m + m * m + 2], np.ones(1, dtype=np.bool_))
+    return (x.reshape((n, 1)), P.reshape((n, n, 1))), (zl, valid), outs, bad
+
+
+@njit(**_NJ)
+def _one_finish(out, outs):
+    k = out.shape[0] - 2
+    out[k] = outs.dof[0]
+    out[k + 1] = 1.0 if outs.ok[0] else 0.0
+
+
+@njit(**_NJ)
+def ekf_one(x, P, z, prediction, sensor, out):
+    """One KF/EKF step of one run: :func:`ekf_step_serial` on one lane, its results in ``out``; 1 if ``z`` is unusable, else 0."""
+    state, obs, outs, bad = _one_setup(x, P, z, out)
+    if bad:
+        return 1
+    ekf_step_serial(state, obs, prediction, sensor, outs)
+    _one_finish(out, outs)
+    return 0
+
+
+@njit(**_NJ)
+def sigma_one(x, P, z, prediction, sensor, sigma, out):
+    """One UKF/CKF step of one run: :func:`sigma_step_serial` on one lane, its results in ``out``; 1 if ``z`` is unusable, else 0."""
+    state, obs, outs, bad = _one_setup(x, P, z, out)
+    if bad:
+        return 1
+    sigma_step_serial(state, obs, prediction, sensor, sigma, outs)
+    _one_finish(out, outs)
+    return 0

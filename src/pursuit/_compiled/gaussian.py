@@ -13,6 +13,10 @@ for the step path and the whole-sequence path alike, so both give the same
 bits; other measurements run the block kernels of
 :mod:`pursuit._compiled.gauss_kernels`.
 
+One run stepped from Python (batch ``()`` or ``(1,)``) takes the online
+lane of :mod:`pursuit._compiled.online` first (the same kernels, a fraction
+of the Python around them), and this step where that lane does not apply.
+
 The filters reach this module only through their ``compiled_path``
 (:data:`EKF`, :data:`SIGMA`, :data:`CS`, loaded by :func:`pursuit.compute.compiled_implementation`);
 it uses only the filters' public API.
@@ -31,6 +35,7 @@ from ..gaussian import Gaussian
 from . import gauss_kernels as GK
 from . import generated, kf_codegen
 from .kernel_args import GaussOutputs, GaussSequenceOutputs, GaussUpdateOutputs, Prediction, SigmaPoints
+from .online import online_lane
 from .particle import measurement_args, use_parallel
 from .specs import M_LINEAR
 
@@ -200,10 +205,10 @@ def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_co
     return means, (covs if keep_cov else None), info
 
 
-EKF = CompiledPath(step=partial(gaussian_step, kind="ekf"), sequence=gaussian_sequence)
+EKF = CompiledPath(step=partial(gaussian_step, kind="ekf"), sequence=gaussian_sequence, online=partial(online_lane, kind="ekf"))
 """The compiled KF/EKF (``ExtendedKalmanFilter.compiled_path``)."""
 
-SIGMA = CompiledPath(step=partial(gaussian_step, kind="sigma"))
+SIGMA = CompiledPath(step=partial(gaussian_step, kind="sigma"), online=partial(online_lane, kind="sigma"))
 """The compiled UKF/CKF (``UnscentedKalmanFilter.compiled_path``); no whole-sequence path."""
 
 

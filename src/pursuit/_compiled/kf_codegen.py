@@ -24,14 +24,18 @@ with the unmeasured columns zeroed, ``P = (I − K H) P⁻ (I − K H)ᵀ + K R 
 A run whose innovation covariance does not factor is flagged in ``ok`` for
 the caller to recompute with NumPy, as in the block kernels.
 
-Two kernels come from one body, so they give the same bits: ``sequence``
+Three kernels come from one body, so they give the same bits: ``sequence``
 (all steps of a block of runs, the state kept in one flat workspace, the
 results written in the track's layout) and ``step`` (one step, lane-major
 inputs, every result in one lane-major output array whose row ranges
 :func:`step_rows` gives, the prediction and cross-covariance the smoother
-needs included).  Both are serial, release the GIL and take a range of
-blocks ``[b0, b1)``, so :func:`pursuit._compiled.generated.run_blocks` can
-share the blocks among threads.  Every sum of products is written with
+needs included) and ``one`` (one step of one run, for a filter stepped one
+run at a time from Python: few arguments, since numba's dispatcher costs
+about a tenth of a microsecond per argument, and the model packed in one
+vector, :func:`one_constants`).  ``sequence`` and ``step`` are serial,
+release the GIL and take a range of blocks ``[b0, b1)``, so
+:func:`pursuit._compiled.generated.run_blocks` can share the blocks among
+threads.  Every sum of products is written with
 explicit ``fma`` calls and nothing is left to the compiler's contraction,
 which would otherwise depend on how often a product is used and so differ
 between the two kernels.  The source is a pure function of ``(n, m)`` and
@@ -45,7 +49,7 @@ import math
 
 import numpy as np
 
-__all__ = ["linear_kf_source", "step_rows", "structure_key"]
+__all__ = ["linear_kf_source", "one_constants", "step_rows", "structure_key"]
 
 #: Runs per block of the sequence kernel: the block's state (about 1 KB per
 #: lane for n = 4) stays in the first-level caches between steps.
@@ -55,6 +59,7 @@ STEP_BLOCK = 256
 
 SEQUENCE_ARGS = "xinit, Pinit, zs, F, Q, lam, H, R, keep_cov, means, covs, innov, S_out, nis, dof, loglik, ok, b0, b1"
 STEP_ARGS = "x, P, z, valid, F, Q, lam, H, R, out, b0, b1"
+ONE_ARGS = "x, P, z, c, out"
 
 
 def structure_key(F: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray) -> tuple:
@@ -425,8 +430,70 @@ def _step_source(n: int, m: int, pats: tuple) -> list[str]:
     return w.lines
 
 
+def one_constants(F: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray, lam: float) -> np.ndarray:
+    """The model of the ``one`` kernel in one vector: ``F``, ``Q``, ``H``, ``R`` row-major, then ``λ``."""
+    return np.concatenate([np.asarray(a, dtype=float).ravel() for a in (F, Q, H, R)] + [np.array([float(lam)])])
+
+
+def _hoist_flat(w: _Writer, name: str, pattern: str, shape, base: int, symmetric=False) -> dict:
+    """:func:`_hoist` from the packed vector ``c`` (the same entries, read at ``base + i * cols + j``)."""
+    entries = _param(name, pattern, shape, symmetric)
+    seen = set()
+    for (i, j), v in entries.items():
+        if isinstance(v, str) and v not in seen:
+            seen.add(v)
+            w.line(f"{v} = c[{base + i * shape[1] + j}]")
+    return entries
+
+
+def _one_source(n: int, m: int, pats: tuple) -> list[str]:
+    """``one(x (n,), P (n, n), z (m,), c, out (rows,))``: the step kernel's body for one run; returns 1 if z is unusable.
+
+    ``z`` holding an infinity or a value beyond ±2⁵⁰⁰ returns 1 before
+    anything is computed (the caller raises the NumPy step's error); else the
+    results go to ``out`` at the rows of :func:`step_rows` and it returns 0.
+    """
+    w = _Writer("")
+    w.line(f"def _one({ONE_ARGS}):")
+    w.indent = "    "
+    w.line(f"for a in range({m}):")
+    w.line(f"    if abs(z[a]) > {2.0 ** 500!r}:  # an infinity too; NaN (missing) compares False")
+    w.line("        return 1")
+    nn, mn = n * n, m * n
+    Fe = _hoist_flat(w, "F", pats[0], (n, n), 0)
+    Qe = _hoist_flat(w, "Q", pats[1], (n, n), nn, symmetric=True)
+    He = _hoist_flat(w, "H", pats[2], (m, n), 2 * nn)
+    Re = _hoist_flat(w, "R", pats[3], (m, m), 2 * nn + mn, symmetric=True)
+    w.line(f"lam = c[{2 * nn + mn + m * m}]")
+    rows = step_rows(n, m)
+    res = _body(w, n, m, Fe, Qe, He, Re,
+                {i: f"x[{i}]" for i in range(n)},
+                {(i, j): f"0.5 * (P[{i}, {j}] + P[{j}, {i}])" for i in range(n) for j in range(i, n)},
+                {a: f"z[{a}]" for a in range(m)},
+                {a: f"not math.isnan(z[{a}])" for a in range(m)})
+
+    def put(name: str, values: list) -> None:
+        first, _ = rows[name]
+        for t, value in enumerate(values):
+            w.line(f"out[{first + t}] = {_lit(value)}")
+
+    put("x", [res["xo"][i] for i in range(n)])
+    put("xp", [res["xp"][i] for i in range(n)])
+    put("P", [res["Po"][i, j] for i in range(n) for j in range(n)])
+    put("Pp", [res["Pp"][i, j] for i in range(n) for j in range(n)])
+    put("cross", [res["cross"][i, j] for i in range(n) for j in range(n)])
+    put("innov", [res["e"][a] for a in range(m)])
+    put("S", [res["S"][a, b] for a in range(m) for b in range(m)])
+    w.line(f"out[{rows['nis'][0]}] = {_lit(res['q'])} if {_lit(res['dd'])} > 0 else np.nan")
+    _loglik_line(w, f"out[{rows['loglik'][0]}]", res)
+    w.line(f"out[{rows['dof'][0]}] = {_lit(res['dd'])}")
+    w.line(f"out[{rows['ok'][0]}] = 1.0 if good else 0.0")
+    w.line("return 0")
+    return w.lines
+
+
 def linear_kf_source(n: int, m: int, pats: tuple) -> str:
-    """Module source defining the jitted kernels ``sequence`` and ``step`` and their block sizes.
+    """Module source defining the jitted kernels ``sequence``, ``step`` and ``one`` and the block sizes.
 
     Parameters
     ----------
@@ -462,5 +529,7 @@ def linear_kf_source(n: int, m: int, pats: tuple) -> str:
         "",
         f"sequence = njit({opts})(_sequence)",
         f"step = njit({opts})(_step)",
+        "one = njit(cache=True, error_model='numpy')(_one)",
     ]
-    return "\n".join(head + _sequence_source(n, m, pats) + [""] + _step_source(n, m, pats) + tail) + "\n"
+    body = _sequence_source(n, m, pats) + [""] + _step_source(n, m, pats) + [""] + _one_source(n, m, pats)
+    return "\n".join(head + body + tail) + "\n"

@@ -34,6 +34,8 @@ from ..gaussian import Gaussian
 
 __all__ = ["FilterBase", "CompiledPath", "prior_batch", "as_gaussian"]
 
+_UNSET = object()
+
 
 @dataclass(frozen=True)
 class CompiledPath:
@@ -49,10 +51,20 @@ class CompiledPath:
         ``sequence(filt, specs, state, zs, keep_cov) -> (means, covs, info) | None``:
         every step of ``zs (K, *batch, m)`` in one call (the layout of
         :func:`pursuit.run`), or ``None`` (no whole-sequence path).
+    online
+        ``online(filt, specs) -> lane | None``: the fast lane for one run
+        stepped from Python, made once per filter, or ``None`` (none).
+        ``lane(state, z, k, dt) -> (state, info) | None`` takes ``z``, ``k``
+        and ``dt`` as the user passed them (it validates them itself) and
+        returns None where that call needs :attr:`step` (then nothing was
+        changed); its results are those of :attr:`step` for the same run,
+        bit for bit, and its info may be a lazily filled mapping with the
+        same keys.
     """
 
     step: Callable[..., tuple[Any, dict[str, np.ndarray]]]
     sequence: Callable[..., Any] | None = None
+    online: Callable[..., Any] | None = None
 
 
 def as_gaussian(prior: Any) -> Gaussian:
@@ -182,6 +194,26 @@ class FilterBase:
     def _compiled_step(self, state: Any, z: np.ndarray, k: int, dt: float | None) -> tuple[Any, dict[str, np.ndarray]]:
         """One step by the compiled implementation (``z`` checked and broadcast)."""
         return self._implementation().step(self, self._specs, state, z, k, dt)
+
+    def _online_step(self, state: Any, z: Any, k: Any, dt: Any) -> tuple[Any, Any] | None:
+        """One step of one run by the compiled implementation's online lane, or None where it does not apply.
+
+        Called by a filter's ``step`` before any validation (the lane checks
+        ``z``, ``k`` and ``dt`` itself); only while :attr:`compiled`.  The lane
+        is made on the first call and kept with the filter (not pickled).
+        """
+        lane = self.__dict__.get("_online_lane", _UNSET)
+        if lane is _UNSET:
+            factory = self._implementation().online if self._step_is_own() else None
+            lane = None if factory is None else factory(self, self._specs)
+            object.__setattr__(self, "_online_lane", lane)
+        return None if lane is None else lane(state, z, k, dt)
+
+    def __getstate__(self) -> dict[str, Any]:
+        # the online lane holds compiled entry points and the last state: made again where unpickled
+        state = dict(self.__dict__)
+        state.pop("_online_lane", None)
+        return state
 
     def _step_is_own(self) -> bool:
         """False when a subclass overrides ``step`` of the class that names the compiled path (it runs from Python)."""

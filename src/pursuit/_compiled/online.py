@@ -1,0 +1,294 @@
+"""One run stepped from Python by the compiled Kalman-family kernels: the online lane of ``filt.step`` (imports numba).
+
+A user who tracks one target calls ``filt.step(state, z)`` once per
+measurement.  The batched glue (:func:`pursuit._compiled.gaussian.gaussian_step`)
+spends tens of microseconds per call around a kernel that takes well under
+one: broadcasting and validating ``z``, rebuilding the lane-major arrays,
+re-deriving the model matrices and their structure key, and assembling a
+dict of a dozen transposed views.  The lane here does, per step, only what
+one run needs:
+
+* the model is packed once per filter (and per distinct ``dt``), not per step;
+* the state a step returned is recognised by identity on the next step, so
+  its arrays go to the kernel as they are (views of the previous output);
+* ``z`` is checked by the kernel itself (its shape and dtype by Python), the
+  NumPy validation runs only for a ``z`` that is not already a float vector;
+* the kernel is called through the entry point of its compiled overload
+  (numba's dispatcher resolves the argument types on every call, about a
+  tenth of a microsecond per argument), with arguments whose types the lane
+  fixes itself;
+* the returned state is a :class:`pursuit.filters.GaussianState` whose mean
+  and covariance are views of one freshly allocated output (so a state is
+  never overwritten by a later step), and the info a :class:`StepInfo`, a
+  mapping with the keys of the NumPy step that slices each value on first
+  access.
+
+A KF/EKF with a linear measurement runs the generated kernel ``one``
+(:mod:`pursuit._compiled.kf_codegen`), written from the same body as the
+batched ``step`` kernel, so both give the same bits; other measurements and
+the UKF/CKF run :func:`pursuit._compiled.gauss_kernels.ekf_one` /
+``sigma_one``, which call the serial block kernel of the batched path on one
+lane (the same kernel) with its outputs as views of one vector.  Where the lane does not apply (a moving observer, a motion
+model that changes with the step, a run whose covariance needs the NumPy
+repair, a batch other than ``()`` or ``(1,)``) it returns ``None`` and the
+filter takes its batched compiled step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import MutableMapping
+from typing import Any, Callable, Iterator
+
+import numpy as np
+
+from .._validation import measurement_for_step, no_infinite_measurement, time_step
+from ..filters.gating import gate_exceeded, keep_prediction
+from ..filters.gaussian import GaussianState
+from . import gauss_kernels as GK
+from . import generated, kf_codegen
+from .kernel_args import Prediction, SigmaPoints
+from .specs import LINEAR, M_LINEAR
+
+__all__ = ["StepInfo", "online_lane", "INFO_KEYS"]
+
+INFO_KEYS = ("innovation", "S", "nis", "dof", "loglik", "fading", "faded", "repaired", "gated",
+             "pred_mean", "pred_cov", "cross_cov")
+"""The info keys of a compiled step, in the order of the batched path."""
+
+_F64 = np.dtype(np.float64)
+_MAX_DT_CACHE = 64  # distinct dt values whose packed model is kept
+
+
+def _new_state(mean: np.ndarray, cov: np.ndarray, k: int) -> GaussianState:
+    # GaussianState is a frozen dataclass without __post_init__: filling its __dict__ is what its
+    # __init__ does (through object.__setattr__, field by field), at a third of the cost
+    s = object.__new__(GaussianState)
+    s.__dict__.update(mean=mean, cov=cov, k=k, memory=None)
+    return s
+
+
+class StepInfo(MutableMapping):
+    """The info of one compiled step of one run: the keys of the NumPy step, each value made on first access.
+
+    The values are views of the step's output (or small arrays made from
+    it) with the shapes of the batched step for the batch ``()`` or ``(1,)``;
+    each is made once and then returned again.  Setting or deleting a key
+    first makes every value, after which it is an ordinary mapping.
+    """
+
+    __slots__ = ("_lane", "_out", "_batch", "_gated", "_made", "_full")
+
+    def __init__(self, lane: Any, out: Any, batch: tuple[int, ...], gated: bool):
+        self._lane = lane
+        self._out = out
+        self._batch = batch
+        self._gated = gated
+        self._made: dict[str, Any] | None = None
+        self._full = False
+
+    def __getitem__(self, key: str) -> Any:
+        made = self._made
+        if made is None:
+            made = self._made = {}
+        elif key in made:
+            return made[key]
+        if self._full or key not in INFO_KEYS:
+            raise KeyError(key)
+        value = self._lane.info_value(key, self._out, self._batch, self._gated)
+        made[key] = value
+        return value
+
+    def _fill(self) -> dict[str, Any]:
+        if not self._full:
+            for key in INFO_KEYS:
+                self[key]
+            self._full = True
+        return self._made
+
+    def __setitem__(self, key: str, value: Any) -> None:
+        self._fill()[key] = value
+
+    def __delitem__(self, key: str) -> None:
+        del self._fill()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._made) if self._full else iter(INFO_KEYS)
+
+    def __len__(self) -> int:
+        return len(self._made) if self._full else len(INFO_KEYS)
+
+    def __contains__(self, key: object) -> bool:
+        return key in self._made if self._full else key in INFO_KEYS
+
+    def __repr__(self) -> str:
+        return f"StepInfo({dict(self)!r})"
+
+
+def _vector(z: Any, m: int, batch: tuple[int, ...], k: int) -> np.ndarray:
+    """``z`` as a writable float64 C vector ``(m,)``, through the NumPy step's checks (shape, infinities)."""
+    z = measurement_for_step(z, batch, m, k)
+    return np.array(z.reshape(m), dtype=float)
+
+
+class _Lane:
+    """One run's step: the kernel ``kernel(x (n,), P (n, n), z (m,), *model, out) -> 0 | 1`` and the Python around it.
+
+    ``out`` is one fresh vector per step with the rows of
+    :func:`pursuit._compiled.kf_codegen.step_rows`; the returned state and
+    the info are views of it.  ``model`` is packed once per distinct ``dt``.
+    """
+
+    def __init__(self, filt, specs, n: int, kernel, pack: Callable):
+        self.ms, self.hs = specs
+        self.n, self.m = n, self.hs.dim
+        self.lam = float(filt.fading.lam)
+        self.gate = filt.gate
+        self.kernel, self.pack = kernel, pack
+        self.call: Callable | None = None
+        self.last: tuple | None = None  # (the state the last step returned, its x, its P, its batch)
+        self.models: dict[float | None, tuple | None] = {}
+        rows = kf_codegen.step_rows(n, self.m)
+        self.rows = rows
+        self.size = sum(c for _, c in rows.values())
+        self.px = rows["P"][0]
+        self.ok_row = rows["ok"][0]
+
+    def model(self, dt: float | None) -> tuple | None:
+        """The kernel's model arguments at ``dt`` (None: the motion model's own), or None where the lane does not apply."""
+        packed = self.models.get(dt, _MISSING)
+        if packed is _MISSING:
+            if len(self.models) >= _MAX_DT_CACHE:
+                self.models.clear()
+            F, _, _ = self.ms.arrays(1, dt)
+            packed = self.models[dt] = self.pack(np.ascontiguousarray(F), np.ascontiguousarray(self.ms.cov(1, dt)))
+        return packed
+
+    def start(self, state: GaussianState) -> tuple | None:
+        """``(x, P, batch)`` of a state this lane did not return, or None for a batch other than () and (1,)."""
+        mean, cov = state.mean, state.cov
+        n = self.n
+        if mean.shape == (n,):
+            batch = ()
+        elif mean.shape == (1, n):
+            batch = (1,)
+        else:
+            return None
+        if cov.shape[-2:] != (n, n) or cov.size != n * n:
+            return None
+        return np.array(mean.reshape(n), dtype=float), np.array(cov.reshape(n, n), dtype=float), batch
+
+    def __call__(self, state: GaussianState, z: Any, k: int | None, dt: Any):
+        k = state.k + 1 if k is None else int(k)
+        last = self.last
+        if last is not None and last[0] is state:
+            x, P, batch = last[1], last[2], last[3]
+        else:
+            got = self.start(state)
+            if got is None:
+                return None
+            x, P, batch = got
+        model = self.models.get(None) if dt is None else None
+        if model is None:
+            model = self.model(None if dt is None else time_step(dt, k))
+            if model is None:
+                return None
+        m = self.m
+        if not (type(z) is np.ndarray and z.dtype is _F64 and z.flags.carray and (z.shape == (m,) or (batch and z.shape == (1, m)))):
+            z = _vector(z, m, batch, k)
+        elif z.ndim == 2:
+            z = z[0]
+        out = np.empty(self.size)
+        call = self.call
+        if call is None:  # the first step: through the dispatcher (compiles or loads), then its entry point
+            self.kernel(x, P, z, *model, out)
+            call = self.call = self.kernel.overloads[tuple(self.kernel.typeof_pyval(a) for a in (x, P, z, *model, out))].entry_point
+        if call(x, P, z, *model, out):
+            no_infinite_measurement(z, k)  # raises, naming the step
+        if out[self.ok_row] == 0.0:
+            return None  # a covariance does not factor: the batched step repairs it with NumPy
+        n = self.n
+        x_new = out[:n]
+        P_new = out[self.px:self.px + n * n].reshape(n, n)
+        gated = False
+        if self.gate is not None:
+            x_new, P_new, gated = self.gated(out, x_new, P_new)
+        if batch:
+            new = _new_state(x_new.reshape(1, n), P_new.reshape(1, n, n), k)
+        else:
+            new = _new_state(x_new, P_new, k)
+        self.last = (new, x_new, P_new, batch)
+        return new, StepInfo(self, out, batch, gated)
+
+    def gated(self, out: np.ndarray, x_new: np.ndarray, P_new: np.ndarray):
+        """The χ² gate of the batched step (:func:`pursuit.filters.gating.apply_gate`) on one run."""
+        rows, n = self.rows, self.n
+        nis, dof = out[rows["nis"][0]], int(out[rows["dof"][0]])
+        mask = gate_exceeded(self.gate, np.array([nis]), np.array([dof], dtype=np.int64), self.m)
+        if not mask[0]:
+            return x_new, P_new, False
+        xp0, pp0 = rows["xp"][0], rows["Pp"][0]
+        mean, cov = keep_prediction(mask, out[xp0:xp0 + n].reshape(1, n), out[pp0:pp0 + n * n].reshape(1, n, n),
+                                    x_new.reshape(1, n), P_new.reshape(1, n, n))
+        return np.ascontiguousarray(mean.reshape(n)), np.ascontiguousarray(cov.reshape(n, n)), True
+
+    def info_value(self, key: str, out: np.ndarray, batch: tuple[int, ...], gated: bool) -> np.ndarray:
+        """One info value of a step whose output is ``out``, shaped as the batched step's for ``batch``."""
+        n, m = self.n, self.m
+        name, core = _INFO_ROWS.get(key, (None, None))
+        if name is not None:
+            first, count = self.rows[name]
+            shape = tuple(n if c == "n" else m for c in core)
+            value = out[first:first + count].reshape(batch + shape)
+            return value.astype(np.int64) if key == "dof" else value
+        if key == "fading":
+            return np.full(batch, self.lam)
+        if key == "faded":
+            return np.full(batch, self.lam > 1.0)
+        if key == "repaired":
+            return np.zeros(batch, dtype=bool)
+        if key == "gated":
+            return np.full(batch, gated)
+        raise KeyError(key)
+
+
+_MISSING = object()
+#: info key -> (row name in step_rows, core shape in n and m)
+_INFO_ROWS = {"innovation": ("innov", "m"), "S": ("S", "mm"), "nis": ("nis", ""), "dof": ("dof", ""),
+              "loglik": ("loglik", ""), "pred_mean": ("xp", "n"), "pred_cov": ("Pp", "nn"), "cross_cov": ("cross", "nn")}
+
+
+def online_lane(filt, specs, kind: str) -> Callable | None:
+    """The online lane of a compiled KF/EKF (``kind="ekf"``) or UKF/CKF (``"sigma"``), or None where it does not apply.
+
+    ``lane(state, z, k, dt) -> (state, info) | None``: one step of one run
+    (batch ``()`` or ``(1,)``), or None when that call needs the batched
+    step.  It applies to a motion model whose matrices depend on ``dt``
+    alone (the built-in linear models) and a sensor that does not move.
+    """
+    ms, hs = specs
+    if ms.kind != LINEAR or hs.moving:
+        return None
+    F, _, _ = ms.arrays(1, None)
+    F2, _, _ = ms.arrays(2, None)
+    Q = np.ascontiguousarray(ms.cov(1, None))
+    if not (np.array_equal(F, F2) and np.array_equal(Q, ms.cov(2, None))):
+        return None
+    F = np.ascontiguousarray(F)
+    n = F.shape[0]
+    lam = float(filt.fading.lam)
+    if kind == "ekf" and hs.kind == M_LINEAR:
+        A, R = np.ascontiguousarray(hs.A), np.ascontiguousarray(hs.R)
+        key = kf_codegen.structure_key(F, Q, A, R)
+
+        def pack(F, Q):
+            if kf_codegen.structure_key(F, Q, A, R) != key:
+                return None  # another zero pattern at this dt: the batched step picks its kernel
+            return (kf_codegen.one_constants(F, Q, A, R, lam),)
+
+        return _Lane(filt, specs, n, generated.linear_kf_kernels(F, Q, A, R).one, pack)
+    sensor = hs.kernel_args(1)
+    if kind == "ekf":
+        return _Lane(filt, specs, n, GK.ekf_one, lambda F, Q: (Prediction(F, Q, lam), sensor))
+    cscale, wm, wc = filt.sigma_weights(n)
+    sigma = SigmaPoints(float(cscale), np.ascontiguousarray(wm), np.ascontiguousarray(wc), wm.shape[0] % 2 == 1)
+    return _Lane(filt, specs, n, GK.sigma_one, lambda F, Q: (Prediction(F, Q, lam), sensor, sigma))

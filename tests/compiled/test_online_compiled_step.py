@@ -1,0 +1,193 @@
+"""One run stepped from Python with ``backend="numba"`` (the online lane) gives the batched compiled step's bits.
+
+The lane (:mod:`pursuit._compiled.online`) takes ``filt.step`` for a batch
+``()`` or ``(1,)``; the batched compiled step (a batch of several runs, where
+the lane does not apply) is the exact reference, the NumPy filter the
+cross-check (1e-9 relative).
+"""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+
+pytest.importorskip("numba")
+
+import pursuit as pu  # noqa: E402
+from pursuit._compiled.online import INFO_KEYS, StepInfo  # noqa: E402
+from pursuit.models import ConstantVelocity, LinearGaussian, RangeBearing  # noqa: E402
+
+MOTION = ConstantVelocity(ndim=2, dt=1.0, q=0.05)
+LINEAR = LinearGaussian.position(4, (0, 2), 1.0)
+RB = RangeBearing(np.array([0.0, -50.0]), 1.0, 0.02)
+X0 = np.array([10.0, 1.0, 40.0, 0.5])
+COV0 = np.diag([4.0, 0.5, 4.0, 0.5])
+T = 30
+DTS = [None, 0.5, None, 2.0, 1.0] * (T // 5)  # dt given on some steps (irregular sampling)
+
+CASES = [
+    ("KF", pu.KalmanFilter, LINEAR),
+    ("EKF-linear", pu.ExtendedKalmanFilter, LINEAR),
+    ("EKF-rb", pu.ExtendedKalmanFilter, RB),
+    ("UKF-rb", pu.UnscentedKalmanFilter, RB),
+    ("CKF-rb", pu.CubatureKalmanFilter, RB),
+]
+
+
+def _measurements(meas, seed=3):
+    rng = np.random.default_rng(seed)
+    x = X0.copy()
+    zs = np.empty((T, meas.dim))
+    for k in range(T):
+        x = MOTION.sample(x, k + 1, rng)
+        zs[k] = meas.sample(x, k + 1, rng)
+    zs[3, 0] = np.nan  # one missing component
+    zs[5] = np.nan  # nothing measured: predict only
+    zs[8, 0] += 40.0  # an outlier for the gate
+    return zs
+
+
+def _filters(cls, meas, **kw):
+    return cls(MOTION, meas, backend="numba", **kw), cls(MOTION, meas, backend="numpy", **kw)
+
+
+OPTIONS = [dict(), dict(fading=1.05), dict(gate=0.99)]
+
+
+def _steps(filt, zs, batch, dts):
+    """States and infos of one run stepped from Python (batch () or (1,))."""
+    s = filt.init(pu.Gaussian(X0, COV0), batch=batch)
+    out = []
+    for k in range(T):
+        z = zs[k] if batch == () else zs[k][None]
+        s, info = filt.step(s, z, dt=dts[k])
+        out.append((s, info))
+    return out
+
+
+@pytest.mark.parametrize("name, cls, meas", CASES)
+@pytest.mark.parametrize("opts", OPTIONS, ids=["plain", "fading", "gate"])
+@pytest.mark.parametrize("batch", [(), (1,)])
+def test_online_equals_batched_compiled_bit_for_bit(name, cls, meas, opts, batch):
+    zs = _measurements(meas)
+    filt, _ = _filters(cls, meas, **opts)
+    online = _steps(filt, zs, batch, DTS)
+    # the reference: a batch of three runs (the lane does not apply), run 0 the same as the online run
+    other = zs + np.random.default_rng(9).normal(0.0, 0.01, zs.shape)
+    zb = np.stack([zs, other, other[::-1]], axis=1)
+    sb = filt.init(pu.Gaussian(np.stack([X0, X0 + 0.1, X0 - 0.1]), np.broadcast_to(COV0, (3, 4, 4))), batch=(3,))
+    assert isinstance(online[0][1], StepInfo)  # the lane was taken
+    gated_somewhere = False
+    for k in range(T):
+        sb, ib = filt.step(sb, zb[k], dt=DTS[k])
+        assert not isinstance(ib, StepInfo)
+        s, info = online[k]
+        assert s.k == k + 1 and s.memory is None
+        assert np.array_equal(s.mean.reshape(4), sb.mean[0], equal_nan=True), k
+        assert np.array_equal(s.cov.reshape(4, 4), sb.cov[0], equal_nan=True), k
+        assert set(info) == set(ib)
+        for key in ib:
+            assert info[key].shape == batch + ib[key].shape[1:], key
+            assert info[key].dtype == ib[key].dtype, key
+            assert np.array_equal(info[key].reshape(ib[key][0].shape), ib[key][0], equal_nan=True), (key, k)
+        gated_somewhere |= bool(info["gated"].any())
+    assert gated_somewhere == ("gate" in opts)
+
+
+@pytest.mark.parametrize("name, cls, meas", CASES)
+@pytest.mark.parametrize("opts", OPTIONS, ids=["plain", "fading", "gate"])
+def test_online_equals_numpy(name, cls, meas, opts):
+    zs = _measurements(meas)
+    filt, ref = _filters(cls, meas, **opts)
+    for batch in [(), (1,)]:
+        online = _steps(filt, zs, batch, DTS)
+        numpy = _steps(ref, zs, batch, DTS)
+        for (s, info), (r, rinfo) in zip(online, numpy):
+            assert s.mean.shape == r.mean.shape and s.cov.shape == r.cov.shape
+            np.testing.assert_allclose(s.mean, r.mean, rtol=1e-9, atol=1e-9 * np.abs(r.mean).max())
+            np.testing.assert_allclose(s.cov, r.cov, rtol=1e-9, atol=1e-9 * np.abs(r.cov).max())
+            assert sorted(info) == sorted(rinfo) == sorted(INFO_KEYS)
+            for key in rinfo:
+                a, b = np.asarray(info[key]), np.asarray(rinfo[key])
+                if key in ("pred_cov", "cross_cov"):
+                    # NumPy keeps one (n, n) matrix where every run shares it; the compiled steps give (*batch, n, n)
+                    assert a.shape == batch + (4, 4) and b.shape in (a.shape, (4, 4)), key
+                    b = np.broadcast_to(b, a.shape)
+                assert a.shape == b.shape, key
+                assert a.dtype == b.dtype, key
+                if a.dtype == bool or a.dtype.kind == "i":
+                    assert np.array_equal(a, b), key
+                else:
+                    scale = max(float(np.abs(np.nan_to_num(b)).max(initial=0.0)), 1e-300)
+                    np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * scale, equal_nan=True, err_msg=key)
+
+
+@pytest.mark.parametrize("name, cls, meas", CASES)
+def test_states_are_independent(name, cls, meas):
+    """A later step never writes into an earlier state or info, and mutating a returned array only changes what it should."""
+    zs = _measurements(meas)
+    filt, _ = _filters(cls, meas)
+    s0 = filt.init(pu.Gaussian(X0, COV0))
+    s1, i1 = filt.step(s0, zs[0])
+    keep = (s1.mean.copy(), s1.cov.copy(), {k: np.array(v, copy=True) for k, v in i1.items()})
+    s2, i2 = filt.step(s1, zs[1])
+    s2.mean[:] = 1e6  # the caller scribbles on the newest state and info
+    i2["innovation"][...] = -1.0
+    s3, _ = filt.step(s2, zs[2])  # the lane reuses s2's arrays as they are now
+    assert np.array_equal(s1.mean, keep[0]) and np.array_equal(s1.cov, keep[1])
+    for key, value in keep[2].items():
+        assert np.array_equal(i1[key], value, equal_nan=True), key
+    # branching: stepping again from s1 gives the first result, and s3 is what the mutated s2 gives
+    again, _ = filt.step(s1, zs[1])
+    fresh = pu.filters.GaussianState(mean=np.full(4, 1e6), cov=s2.cov.copy(), k=2)
+    s3_ref, _ = filt.step(fresh, zs[2])
+    assert not np.shares_memory(again.mean, s2.mean)
+    assert np.array_equal(s3.mean, s3_ref.mean) and np.array_equal(s3.cov, s3_ref.cov)
+    s2b, _ = filt.step(s1, zs[1])
+    assert np.array_equal(s2b.cov, again.cov)
+
+
+def test_info_mapping():
+    filt, _ = _filters(pu.KalmanFilter, LINEAR)
+    s, info = filt.step(filt.init(pu.Gaussian(X0, COV0)), np.array([10.0, 40.0]))
+    assert isinstance(info, StepInfo)
+    assert list(info) == list(INFO_KEYS) and len(info) == len(INFO_KEYS)
+    assert "nis" in info and "nope" not in info and info.get("nope") is None
+    with pytest.raises(KeyError):
+        info["nope"]
+    assert info["nis"] is info["nis"]  # made once
+    assert info["dof"].dtype == np.int64 and info["dof"] == 2
+    info["extra"] = np.ones(1)  # a caller may add keys, as to the batched step's dict
+    del info["cross_cov"]
+    assert "extra" in info and "cross_cov" not in info and len(info) == len(INFO_KEYS)
+    assert set(dict(info)) == (set(INFO_KEYS) - {"cross_cov"}) | {"extra"}
+
+
+@pytest.mark.parametrize("name, cls, meas", [CASES[0], CASES[3]])
+def test_bad_input_raises_as_numpy(name, cls, meas):
+    filt, ref = _filters(cls, meas)
+    s, r = filt.init(pu.Gaussian(X0, COV0)), ref.init(pu.Gaussian(X0, COV0))
+    for z, kw in [(np.array([np.inf, 1.0]), {}), (np.array([1e200, 1.0]), {}), (np.ones(3), {}), (np.ones((1, 2)), {}),
+                  (np.ones(2), {"dt": -1.0}), (np.ones(2), {"dt": float("nan")})]:
+        with pytest.raises(ValueError) as got:
+            filt.step(s, z, **kw)
+        with pytest.raises(ValueError) as want:
+            ref.step(r, z, **kw)
+        assert str(got.value) == str(want.value)
+    # a list or an int array is converted as by the NumPy step
+    a, _ = filt.step(s, [60.0, 1.0])
+    b, _ = filt.step(s, np.array([60.0, 1.0]))
+    assert np.array_equal(a.mean, b.mean)
+
+
+def test_filter_pickles_after_stepping():
+    filt, _ = _filters(pu.UnscentedKalmanFilter, RB)
+    s, _ = filt.step(filt.init(pu.Gaussian(X0, COV0)), np.array([60.0, 1.0]))
+    copy = pickle.loads(pickle.dumps(filt))
+    assert "_online_lane" not in vars(copy)
+    a, _ = filt.step(s, np.array([61.0, 1.01]))
+    b, info = copy.step(s, np.array([61.0, 1.01]))
+    assert isinstance(info, StepInfo)
+    assert np.array_equal(a.mean, b.mean) and np.array_equal(a.cov, b.cov)
