@@ -46,11 +46,12 @@ demo: $(VENV)/.installed
 # tests/conftest.py points numba's cache (and the generated kernels) at one folder under
 # .test-cache/ for every worker and subprocess, named by a hash of src/pursuit/_compiled: the
 # passes below compile each kernel about once between them (docs/testing.md#running-the-tests).
+# --durations=15 lists the slowest tests of each pass: a new test over about 5 s gets the slow mark.
 test: $(VENV)/.installed-test
-	$(BIN)/python -m pytest -n auto -m "not slow" $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -n auto -m "not slow" --durations=15 $(PYTEST_ARGS)
 
 test-slow: $(VENV)/.installed-test
-	$(BIN)/python -m pytest -n auto -m slow $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -n auto -m slow --durations=15 $(PYTEST_ARGS)
 
 test-all: test test-slow
 
