@@ -1,17 +1,20 @@
 # pursuit — two commands on a fresh machine with python3 and pip:
 #   make demo   set up .venv, reproduce every experiment, write results/
-#   make test   set up .venv with the test extras, run the test suite
+#   make test   set up .venv with the test extras, run the test suite (all but the tests marked slow)
+#   make test-slow / make test-all   the tests marked slow / everything (.ci/run runs both passes)
 
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 PYTEST_ARGS ?=
 
-.PHONY: demo test test-avx2-paths bench docs clean help
+.PHONY: demo test test-slow test-all test-avx2-paths bench docs clean help
 
 help:
 	@echo "make demo   reproduce every experiment under experiments/ into results/"
-	@echo "make test   run the test suite"
+	@echo "make test   run the test suite but the tests marked slow (under 10 min on two cores)"
+	@echo "make test-slow   run the tests marked slow: whole reproductions, benchmark scripts, million-step and many-run checks"
+	@echo "make test-all   make test, then make test-slow"
 	@echo "make test-avx2-paths   on an AVX-512 CPU, rerun the compiled, cross-check and robustness tests on NumPy's AVX2 paths"
 	@echo "make bench  run the speed benchmarks (writes docs/benchmarks.md)"
 	@echo "make docs   build the API reference (Sphinx, warnings are errors) into docs/_build/html"
@@ -32,7 +35,7 @@ $(VENV)/.installed-docs: pyproject.toml | $(BIN)/python
 	@touch $@ $(VENV)/.installed
 
 # The API reference from the docstrings; -W: a warning (a docstring that does not parse) fails the build.
-# tests/test_api_docs.py runs the same build in `make test`.
+# tests/test_api_docs.py runs the same build in `make test-slow`.
 docs: $(VENV)/.installed-docs
 	$(BIN)/python -m sphinx -b html -W --keep-going docs/api docs/_build/html
 	@echo "open docs/_build/html/index.html"
@@ -40,8 +43,17 @@ docs: $(VENV)/.installed-docs
 demo: $(VENV)/.installed
 	$(BIN)/pursuit reproduce all --out results
 
+# tests/conftest.py points numba's cache (and the generated kernels) at one folder under
+# .test-cache/ for every worker and subprocess, named by a hash of src/pursuit/_compiled: the
+# passes below compile each kernel about once between them (docs/testing.md#running-the-tests).
+# --durations=15 lists the slowest tests of each pass: a new test over about 5 s gets the slow mark.
 test: $(VENV)/.installed-test
-	$(BIN)/python -m pytest -n auto $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -n auto -m "not slow" --durations=15 $(PYTEST_ARGS)
+
+test-slow: $(VENV)/.installed-test
+	$(BIN)/python -m pytest -n auto -m slow --durations=15 $(PYTEST_ARGS)
+
+test-all: test test-slow
 
 # On a CPU with AVX-512, NumPy's elementary functions differ from the AVX2 ones in the last bit:
 # run the tests that care a second time on NumPy's AVX2 paths (docs/compiled-backend.md).
@@ -65,4 +77,4 @@ bench: $(BENCH_VENV)/.installed
 	$(BENCH_VENV)/bin/python benchmarks/run.py
 
 clean:
-	rm -rf $(VENV) results .pytest_cache .hypothesis build dist docs/_build
+	rm -rf $(VENV) results .pytest_cache .hypothesis .test-cache build dist docs/_build

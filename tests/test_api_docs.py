@@ -11,6 +11,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow
 def test_api_reference_builds_without_warnings(tmp_path):
     pytest.importorskip("sphinx", reason="the API reference needs Sphinx (the `docs` and `test` extras)")
     out = tmp_path / "html"

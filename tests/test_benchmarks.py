@@ -40,6 +40,7 @@ def test_one_core_pins_numpys_blas_to_one_thread():
     assert proc.stdout.strip() == "False"  # too late once NumPy is loaded, and it says so
 
 
+@pytest.mark.slow
 def test_floor_benchmark_quick_mode():
     pytest.importorskip("numba")
     proc = subprocess.run(
@@ -84,6 +85,7 @@ def test_upf_benchmark_quick_mode():
         assert row in proc.stdout
 
 
+@pytest.mark.slow
 def test_p1_benchmark_and_its_floor_quick_mode():
     pytest.importorskip("numba")
     for extra, rows in (
@@ -112,6 +114,7 @@ def test_multi_target_benchmark_quick_mode():
     assert "| pursuit GNN | 10 |" in proc.stdout and "| pursuit JPDA | 10 |" in proc.stdout
 
 
+@pytest.mark.slow
 def test_pmht_benchmark_quick_mode():
     proc = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks" / "run.py"), "--quick", "--only", "pmht"],
@@ -138,6 +141,7 @@ def test_pmht_cost_growth_quick_mode(tmp_path):
     assert "PMHT ~ x^" in proc.stdout and (tmp_path / "g.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_gmphd_benchmark_quick_mode():
     proc = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks" / "run.py"), "--quick", "--only", "gmphd"],

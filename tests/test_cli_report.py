@@ -68,6 +68,7 @@ def test_report_errors(tmp_path, capsys):
     assert "not a pursuit output folder" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_reproduce_all_writes_an_index(tmp_path, capsys):
     root = tmp_path / "results"
     assert main(["reproduce", "all", "--runs", "2", "--no-progress", "--no-pdf", "-o", str(root)]) == 0

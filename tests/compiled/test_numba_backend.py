@@ -208,6 +208,7 @@ def test_mh_cuckoo_pf_agrees_particle_for_particle(variant):
     _close(a.particles, b.particles, "particles")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cls", [pu.CSPF, pu.ICSPF], ids=["cs-pf", "ics-pf"])
 def test_cuckoo_pfs_agree_in_distribution_on_any_cpu(cls):
     """The two backends' per-run RMSE on UNGM agree in mean over 400 paired runs, whatever the elementary functions.
@@ -355,6 +356,7 @@ def test_builtin_experiments_agree(name, monkeypatch):
     assert compared > 0
 
 
+@pytest.mark.slow
 def test_second_process_loads_compiled_code_from_the_cache(tmp_path):
     """cache=True: after one process compiled the kernels, a fresh one loads them (cache hits, no misses).
 

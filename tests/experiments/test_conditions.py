@@ -165,6 +165,7 @@ def test_config_errors_name_the_field(tmp_path, extra, replace, message, line):
         assert err.value.line == line
 
 
+@pytest.mark.slow
 def test_cli_reproduces_p2_and_writes_the_output(tmp_path, capsys):
     code = main(["run", str(P2), "--runs", "3", "--out", str(tmp_path / "p2"), "--no-progress"])
     assert code == 0

@@ -17,6 +17,7 @@ from pursuit.experiment import ConfigError, find_experiment, load_experiment
 P4 = find_experiment("p4-maneuver")
 
 
+@pytest.mark.slow
 def test_p4_maneuver_reproduces_with_tables_and_figures(tmp_path, capsys):
     out = tmp_path / "res"
     assert main(["reproduce", "p4-maneuver", "--runs", "6", "--out", str(out), "--no-progress"]) == 0

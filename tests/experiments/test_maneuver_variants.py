@@ -13,6 +13,7 @@ from pursuit.experiment import ConfigError, load_experiment
 from pursuit.experiments.maneuver import log_ratio_interval
 
 
+@pytest.mark.slow
 def test_p4_bearings_reproduces_with_a_verdict_per_claim(tmp_path, capsys):
     out = tmp_path / "res"
     assert main(["reproduce", "p4-bearings", "--runs", "4", "--out", str(out), "--no-progress", "--no-pdf"]) == 0

@@ -45,6 +45,7 @@ def _write(tmp_path: Path, text: str) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_mt_crossing_reproduces_with_table_and_figures(tmp_path, capsys):
     out = tmp_path / "res"
     assert main(["reproduce", "mt-crossing", "--runs", "5", "--out", str(out), "--no-progress"]) == 0

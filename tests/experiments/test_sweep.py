@@ -129,6 +129,7 @@ def test_the_bundled_experiments_load(name):
     assert exp.kind == "sweep" and exp.runs == 100
 
 
+@pytest.mark.slow
 def test_reproduce_prints_the_paper_table_and_writes_figures(tmp_path, capsys):
     code = main(["reproduce", "p1-ungm", "--runs", "3", "--out", str(tmp_path), "--no-progress"])
     assert code == 0

@@ -153,6 +153,7 @@ def test_figure_problems_accepts_stacked_panels_with_one_legend():
     assert figure_problems(fig) == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list_experiments())
 def test_every_bundled_experiment_has_publication_ready_figures(name):
     """Labelled axes (with units where the quantity has one) and legends, for every kind's figures."""
