@@ -1,0 +1,345 @@
+"""One run at a time: µs per `step` of one run stepped from Python, against FilterPy and `particles`.
+
+Work (the same model and measurements for every implementation; one run of
+T = 2000 steps, the time per step is the median of ``REPEATS`` passes):
+
+* **KF**: 2-D constant-velocity target (4 states, continuous white-noise
+  acceleration q = 0.01, dt = 1), position measured with unit variance.
+  Peer: FilterPy ``KalmanFilter.predict(); update(z)``.
+* **EKF** and **UKF**: the same motion with a range-bearing sensor at
+  (0, -50) (σ = 1 m, 0.02 rad); UKF with α = 1, β = 2, κ = 0.  Peers:
+  FilterPy ``ExtendedKalmanFilter.predict(); update(z, HJacobian, Hx,
+  residual=...)`` and ``UnscentedKalmanFilter`` with
+  ``MerweScaledSigmaPoints``.
+* **PF**: bootstrap particle filter, N = 1000 particles, systematic
+  resampling at every step, the same CV motion ranged by three anchors
+  (σ = 2 m).  Peer: ``particles`` (Chopin) ``SMC(Bootstrap(...))`` advanced
+  one step at a time with ``next(alg)``; FilterPy has no particle filter.
+
+pursuit's rows call ``state, info = filt.step(state, z)`` once per step,
+from Python, with batch ``()`` (one run, no batch axis) and ``(1,)``.
+``ratio`` is the peer's µs per step divided by the row's: above 1 the row
+is faster than the peer.  Compiled rows come from
+``benchmarks/_online_compiled.py`` (its ``rows()``) where that module exists.
+
+Run::
+
+    PYTHONPATH=src taskset -c 1 .bench-venv/bin/python benchmarks/bench_online.py
+    .bench-venv/bin/python benchmarks/run.py --only online
+"""
+
+from __future__ import annotations
+
+import _one_core  # first: NumPy's BLAS on one thread (benchmarks/ is on sys.path when a benchmark runs)
+
+_one_core.pin()
+
+import statistics  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+import warnings  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Callable  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT / "src") not in sys.path:
+    sys.path.insert(0, str(ROOT / "src"))
+
+import pursuit as pu  # noqa: E402
+from pursuit.models import ConstantVelocity, LinearGaussian, RangeBearing  # noqa: E402
+
+STEPS = 2000
+REPEATS = 7
+SENSOR = (0.0, -50.0)
+SIG_R, SIG_B = 1.0, 0.02
+ANCHORS = np.array([[0.0, 0.0], [100.0, 0.0], [0.0, 100.0]])
+SIG_ANCHOR = 2.0
+PARTICLES = 1000
+
+Row = tuple[str, str, float, float | None]  # (name, backend, µs per step, ratio to the peer)
+
+
+def per_step_us(make: Callable[[], Callable[[], object]], steps: int, repeats: int = REPEATS) -> float:
+    """Median over ``repeats`` passes of the µs per step; ``make()`` builds a fresh pass (not timed)."""
+    times = []
+    for _ in range(repeats):
+        go = make()
+        t0 = time.perf_counter()
+        go()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times) / steps * 1e6
+
+
+# -- work ---------------------------------------------------------------------
+def motion() -> ConstantVelocity:
+    return ConstantVelocity(ndim=2, dt=1.0, q=0.01, noise="continuous")
+
+
+def truth(steps: int, seed: int = 0) -> np.ndarray:
+    """(steps, 4) one CV trajectory."""
+    rng = np.random.default_rng(seed)
+    mot, x = motion(), np.array([0.0, 1.0, 0.0, 0.5])
+    out = np.empty((steps, 4))
+    for k in range(steps):
+        x = mot.sample(x, k + 1, rng)
+        out[k] = x
+    return out
+
+
+def kf_work(steps: int):
+    mot = motion()
+    meas = LinearGaussian.position(4, mot.position_indices, 1.0)
+    zs = meas.sample(truth(steps), 1, np.random.default_rng(1))
+    return mot, meas, zs
+
+
+def rb_work(steps: int):
+    mot = motion()
+    meas = RangeBearing(np.array(SENSOR), SIG_R, SIG_B)
+    zs = meas.sample(truth(steps), 1, np.random.default_rng(1))
+    return mot, meas, zs
+
+
+def pf_work(steps: int):
+    from pursuit.models import RangeSensors
+
+    mot = ConstantVelocity(ndim=2, dt=1.0, q=0.01, noise="discrete")
+    meas = RangeSensors(ANCHORS, SIG_ANCHOR)
+    x = truth(steps) + np.array([30.0, 0.0, 30.0, 0.0])
+    zs = meas.sample(x, 1, np.random.default_rng(1))
+    return mot, meas, zs, np.array([30.0, 1.0, 30.0, 0.5])
+
+
+PRIOR_COV = np.diag([25.0, 1.0, 25.0, 1.0])
+
+
+# -- pursuit ---------------------------------------------------------------------
+def _pursuit_pass(filt, zs, prior, batch, rng=None):
+    def make():
+        state = filt.init(prior, batch=batch, rng=rng)
+        z_steps = [np.broadcast_to(z, (*batch, z.shape[-1])) for z in zs]
+
+        def go():
+            s = state
+            for z in z_steps:
+                s, _ = filt.step(s, z)
+
+        return go
+
+    return make
+
+
+def pursuit_rows(backend: str, steps: int = STEPS, repeats: int = REPEATS) -> list[tuple[str, float]]:
+    """(name, µs per step) for pursuit's filters computing with ``backend``, one run stepped from Python."""
+    out = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a fallback warning: the backend column says what ran
+        mot, meas, zs = kf_work(steps)
+        prior = pu.Gaussian(np.zeros(4), np.eye(4))
+        kf = pu.KalmanFilter(mot, meas, backend=backend)
+        for batch in ((), (1,)):
+            out.append((f"KF, batch {batch}", per_step_us(_pursuit_pass(kf, zs, prior, batch), steps, repeats)))
+        mot, meas, zs = rb_work(steps)
+        prior = pu.Gaussian(np.array([0.0, 1.0, 0.0, 0.5]), np.eye(4))
+        for label, cls in (("EKF", pu.ExtendedKalmanFilter), ("UKF", pu.UnscentedKalmanFilter)):
+            filt = cls(mot, meas, backend=backend)
+            for batch in ((), (1,)):
+                out.append((f"{label} range-bearing, batch {batch}", per_step_us(_pursuit_pass(filt, zs, prior, batch), steps, repeats)))
+        mot, meas, zs, x0 = pf_work(steps)
+        pf = pu.BootstrapParticleFilter(mot, meas, particles=PARTICLES, backend=backend)
+        prior = pu.Gaussian(x0, PRIOR_COV)
+        pf_steps = max(steps // 10, 50)  # N = 1000 particles: a tenth of the steps keeps the pass short
+        out.append(
+            (
+                f"PF N={PARTICLES}, batch (1,)",
+                per_step_us(_pursuit_pass(pf, zs[:pf_steps], prior, (1,), np.random.default_rng(0)), pf_steps, repeats),
+            )
+        )
+    return out
+
+
+# -- peers ------------------------------------------------------------------------
+def filterpy_us(kind: str, steps: int = STEPS, repeats: int = REPEATS) -> float | None:
+    """µs per FilterPy ``predict(); update(z)`` on the same work (None if FilterPy is not installed)."""
+    try:
+        from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
+    except ImportError:
+        return None
+    if kind == "kf":
+        mot, meas, zs = kf_work(steps)
+        zcol = [z.reshape(2, 1) for z in zs]
+
+        def make():
+            kf = KalmanFilter(dim_x=4, dim_z=2)
+            kf.F = np.array(mot.transition_matrix())
+            kf.Q = np.array(mot.cov())
+            kf.H = np.array(meas.matrix())
+            kf.R = np.array(meas.cov())
+            kf.x = np.zeros((4, 1))
+            kf.P = np.eye(4)
+
+            def go():
+                for z in zcol:
+                    kf.predict()
+                    kf.update(z)
+
+            return go
+
+        return per_step_us(make, steps, repeats)
+    mot, meas, zs = rb_work(steps)
+    F = np.array(mot.transition_matrix())
+    x0 = np.array([0.0, 1.0, 0.0, 0.5])
+    if kind == "ekf":
+        zcol = [z.reshape(2, 1) for z in zs]
+
+        def hj(x):
+            return meas.jacobian(x[:, 0])
+
+        def hx(x):
+            return meas.h(x[:, 0]).reshape(2, 1)
+
+        def res(a, b):
+            return meas.residual(a[:, 0], b[:, 0]).reshape(2, 1)
+
+        def make():
+            ekf = ExtendedKalmanFilter(dim_x=4, dim_z=2)
+            ekf.F = F.copy()
+            ekf.Q = np.array(mot.cov())
+            ekf.R = np.array(meas.cov())
+            ekf.x = x0.reshape(4, 1).copy()
+            ekf.P = np.eye(4)
+
+            def go():
+                for z in zcol:
+                    ekf.predict()
+                    ekf.update(z, hj, hx, residual=res)
+
+            return go
+
+        return per_step_us(make, steps, repeats)
+
+    def fx(x, dt):
+        return F @ x
+
+    def make():
+        pts = MerweScaledSigmaPoints(4, alpha=1.0, beta=2.0, kappa=0.0)
+        ukf = UnscentedKalmanFilter(dim_x=4, dim_z=2, dt=1.0, fx=fx, hx=meas.h, points=pts, residual_z=meas.residual)
+        ukf.Q = np.array(mot.cov())
+        ukf.R = np.array(meas.cov())
+        ukf.x = x0.copy()
+        ukf.P = np.eye(4)
+
+        def go():
+            for z in zs:
+                ukf.predict()
+                ukf.update(z)
+
+        return go
+
+    return per_step_us(make, steps, repeats)
+
+
+def particles_us(steps: int = STEPS, repeats: int = REPEATS) -> float | None:
+    """µs per step of ``particles`` (Chopin) advanced one step at a time with ``next(alg)`` (None if not installed)."""
+    try:
+        import particles
+        from particles import distributions as dists
+        from particles import state_space_models as ssm
+    except ImportError:
+        return None
+    mot, meas, zs, x0 = pf_work(steps)
+    pf_steps = max(steps // 10, 50)
+    F = np.asarray(mot.transition_matrix())
+    G = np.asarray(mot.noise_factor())  # Q = G Gᵀ is singular (discrete white-noise acceleration)
+    R = SIG_ANCHOR**2 * np.eye(len(ANCHORS))
+
+    class LinearGaussianMove(dists.ProbDist):
+        dim = 4
+
+        def __init__(self, loc):
+            self.loc = loc
+
+        def rvs(self, size=None):
+            return self.loc + np.random.standard_normal((self.loc.shape[0], G.shape[1])) @ G.T
+
+    class RangeCV(ssm.StateSpaceModel):
+        def PX0(self):
+            return dists.MvNormal(loc=x0, cov=PRIOR_COV)
+
+        def PX(self, t, xp):
+            return LinearGaussianMove(xp @ F.T)
+
+        def PY(self, t, xp, x):
+            pos = x[:, [0, 2]]
+            ranges = np.sqrt(((pos[:, None, :] - ANCHORS[None, :, :]) ** 2).sum(-1))
+            return dists.MvNormal(loc=ranges, cov=R)
+
+    data = list(zs[:pf_steps])
+
+    def make():
+        fk = ssm.Bootstrap(ssm=RangeCV(), data=data)
+        alg = particles.SMC(fk=fk, N=PARTICLES, resampling="systematic", ESSrmin=1.0, store_history=False, collect=None)
+
+        def go():
+            for _ in range(pf_steps):
+                next(alg)
+
+        return go
+
+    return per_step_us(make, pf_steps, repeats)
+
+
+# -- the table ----------------------------------------------------------------------
+def _peer_of(name: str) -> str:
+    return name.split(" ")[0].rstrip(",")
+
+
+def peer_rows(steps: int = STEPS, repeats: int = REPEATS) -> dict[str, tuple[str, float | None]]:
+    """The peer of each kind (``KF``, ``EKF``, ``UKF``, ``PF``): (label, µs per step or None)."""
+    return {
+        "KF": ("FilterPy KalmanFilter", filterpy_us("kf", steps, repeats)),
+        "EKF": ("FilterPy ExtendedKalmanFilter", filterpy_us("ekf", steps, repeats)),
+        "UKF": ("FilterPy UnscentedKalmanFilter (Merwe points)", filterpy_us("ukf", steps, repeats)),
+        "PF": ("particles SMC(Bootstrap), next(alg)", particles_us(steps, repeats)),
+    }
+
+
+def rows(backend: str = "numpy", steps: int = STEPS, repeats: int = REPEATS, peers: dict | None = None) -> list[Row]:
+    """(name, backend, µs per step, peer µs / row µs) for pursuit with ``backend``; ``peers`` from :func:`peer_rows`."""
+    peers = peer_rows(steps, repeats) if peers is None else peers
+    out = []
+    for name, us in pursuit_rows(backend, steps, repeats):
+        ref = peers[_peer_of(name)][1]
+        out.append((f"pursuit {name}", backend, us, ref / us if ref else None))
+    return out
+
+
+def table(all_rows: list[Row]) -> str:
+    lines = ["| implementation | backend | µs per step | ratio (peer µs / µs) |", "|---|---|---|---|"]
+    for name, backend, us, ratio in all_rows:
+        lines.append(f"| {name} | {backend} | {us:.1f} | {'' if ratio is None else f'{ratio:.2f}'} |")
+    return "\n".join(lines)
+
+
+def main(quick: bool = False) -> list[Row]:
+    steps, repeats = (200, 3) if quick else (STEPS, REPEATS)
+    peers = peer_rows(steps, repeats)
+    all_rows: list[Row] = []
+    for label, us in peers.values():
+        all_rows.append((label, "peer", us, 1.0) if us is not None else (label, "not installed", float("nan"), None))
+    all_rows += rows("numpy", steps, repeats, peers)
+    try:
+        import _online_compiled  # the compiled rows (benchmarks/_online_compiled.py), where present
+    except ImportError:
+        _online_compiled = None
+    if _online_compiled is not None:
+        all_rows += _online_compiled.rows(steps=steps, repeats=repeats, peers=peers)
+    print(f"One run, {steps} steps (PF: {max(steps // 10, 50)}), median of {repeats} passes; one core.\n")
+    print(table(all_rows))
+    return all_rows
+
+
+if __name__ == "__main__":
+    main(quick="--quick" in sys.argv)
