@@ -131,33 +131,40 @@ def _pursuit_pass(filt, zs, prior, batch, rng=None):
     return make
 
 
-def pursuit_rows(backend: str, steps: int = STEPS, repeats: int = REPEATS) -> list[tuple[str, float]]:
-    """(name, µs per step) for pursuit's filters computing with ``backend``, one run stepped from Python."""
-    out = []
+KINDS = ("kf", "ekf", "ukf", "pf")
+
+
+def pursuit_kind_rows(kind: str, backend: str, steps: int = STEPS, repeats: int = REPEATS) -> list[tuple[str, float]]:
+    """(name, µs per step) of one kind (``"kf"``, ``"ekf"``, ``"ukf"``, ``"pf"``) computing with ``backend``."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # a fallback warning: the backend column says what ran
-        mot, meas, zs = kf_work(steps)
-        prior = pu.Gaussian(np.zeros(4), np.eye(4))
-        kf = pu.KalmanFilter(mot, meas, backend=backend)
-        for batch in ((), (1,)):
-            out.append((f"KF, batch {batch}", per_step_us(_pursuit_pass(kf, zs, prior, batch), steps, repeats)))
-        mot, meas, zs = rb_work(steps)
-        prior = pu.Gaussian(np.array([0.0, 1.0, 0.0, 0.5]), np.eye(4))
-        for label, cls in (("EKF", pu.ExtendedKalmanFilter), ("UKF", pu.UnscentedKalmanFilter)):
+        if kind == "kf":
+            mot, meas, zs = kf_work(steps)
+            prior = pu.Gaussian(np.zeros(4), np.eye(4))
+            filt = pu.KalmanFilter(mot, meas, backend=backend)
+            label = "KF"
+        elif kind in ("ekf", "ukf"):
+            mot, meas, zs = rb_work(steps)
+            prior = pu.Gaussian(np.array([0.0, 1.0, 0.0, 0.5]), np.eye(4))
+            cls = pu.ExtendedKalmanFilter if kind == "ekf" else pu.UnscentedKalmanFilter
             filt = cls(mot, meas, backend=backend)
-            for batch in ((), (1,)):
-                out.append((f"{label} range-bearing, batch {batch}", per_step_us(_pursuit_pass(filt, zs, prior, batch), steps, repeats)))
-        mot, meas, zs, x0 = pf_work(steps)
-        pf = pu.BootstrapParticleFilter(mot, meas, particles=PARTICLES, backend=backend)
-        prior = pu.Gaussian(x0, PRIOR_COV)
-        pf_steps = max(steps // 10, 50)  # N = 1000 particles: a tenth of the steps keeps the pass short
-        out.append(
-            (
-                f"PF N={PARTICLES}, batch (1,)",
-                per_step_us(_pursuit_pass(pf, zs[:pf_steps], prior, (1,), np.random.default_rng(0)), pf_steps, repeats),
-            )
-        )
-    return out
+            label = f"{kind.upper()} range-bearing"
+        else:
+            mot, meas, zs, x0 = pf_work(steps)
+            pf = pu.BootstrapParticleFilter(mot, meas, particles=PARTICLES, backend=backend)
+            prior = pu.Gaussian(x0, PRIOR_COV)
+            pf_steps = max(steps // 10, 50)  # N = 1000 particles: a tenth of the steps keeps the pass short
+            make = _pursuit_pass(pf, zs[:pf_steps], prior, (1,), np.random.default_rng(0))
+            return [(f"PF N={PARTICLES}, batch (1,)", per_step_us(make, pf_steps, repeats))]
+        return [
+            (f"{label}, batch {batch}", per_step_us(_pursuit_pass(filt, zs, prior, batch), steps, repeats))
+            for batch in ((), (1,))
+        ]
+
+
+def pursuit_rows(backend: str, steps: int = STEPS, repeats: int = REPEATS) -> list[tuple[str, float]]:
+    """(name, µs per step) for pursuit's filters computing with ``backend``, one run stepped from Python."""
+    return [row for kind in KINDS for row in pursuit_kind_rows(kind, backend, steps, repeats)]
 
 
 # -- peers ------------------------------------------------------------------------
