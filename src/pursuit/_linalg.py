@@ -16,6 +16,7 @@ chosen for two properties the rest of pursuit relies on:
 
 from __future__ import annotations
 
+import math
 from typing import Callable
 
 import numpy as np
@@ -328,7 +329,7 @@ def small_inv_logdet(S: np.ndarray) -> tuple[np.ndarray, float] | None:
         a = s[0]
         if not a > 0.0:
             return None
-        return np.array(1.0 / a).reshape(S.shape), float(np.log(a))
+        return np.array(1.0 / a).reshape(S.shape), math.log(a)
     if m == 2:
         a, b, c, d = s
         det = a * d - b * c
@@ -350,7 +351,7 @@ def small_inv_logdet(S: np.ndarray) -> tuple[np.ndarray, float] | None:
         ]  # fmt: skip
     else:
         return None
-    return np.array(inv).reshape(S.shape), float(np.log(det))
+    return np.array(inv).reshape(S.shape), math.log(det)
 
 
 def small_cholesky(P: np.ndarray) -> np.ndarray | None:

@@ -354,7 +354,7 @@ class _GaussianFilter(FilterBase):
         k = state.k + 1 if k is None else int(k)
         dt = time_step(dt, k)
         batch = state.batch
-        if not _checked_measurement(z, batch, self.measurement):
+        if not _checked_measurement(z, batch, self.measurement):  # the cheap check of one run, else the full one
             z = measurement_for_step(z, batch, self._measurement_dim(), k)
         if self._specs is not None and len(batch) <= 1:
             return self._compiled_step(state, z, k, dt)
@@ -390,8 +390,8 @@ class _GaussianFilter(FilterBase):
         if meas is None:
             return None
         m = z1.shape[0]
-        valid = z1 == z1  # False where NaN (missing)
-        if valid.all():
+        missing = sum(v != v for v in z1.tolist())  # NaN components
+        if not missing:
             out = _one_run_update(pred.mean, P_pred, z1, meas, self.measurement, k)
             if out is None:
                 return None
@@ -400,9 +400,9 @@ class _GaussianFilter(FilterBase):
             gated = self.gate is not None and nis > chi2_gate_thresholds(self.gate, m)[m]
             if gated:  # the prediction, the info describing the rejected measurement (as apply_gate)
                 mean, cov = pred.mean, _sym(P_pred)
-        elif not valid.any():  # predict only: zero gain, unit variance for every missing component
+        elif missing == m:  # predict only: zero gain, unit variance for every missing component
             mean, cov, gated = pred.mean, _sym(P_pred), False
-            nu, S, nis, dof, loglik = np.full(m, np.nan), np.eye(m), np.nan, 0, 0.0
+            nu, S, nis, dof, loglik = np.array([np.nan] * m), _eye(m).copy(), np.nan, 0, 0.0
         else:
             return None
         P_out, cross = P_pred, pred.cross
@@ -605,16 +605,16 @@ _ONE_RUN = ((), (1,))  # batches the one-run step serves
 
 
 def _checked_measurement(z: Any, batch: tuple[int, ...], measurement: Any) -> bool:
-    """True when ``z`` already is what :func:`measurement_for_step` returns: float64, ``(*batch, m)``, finite and within range.
+    """True when ``z`` already is what :func:`measurement_for_step` returns for one run: float64, ``(*batch, m)``, within range.
 
-    One comparison instead of the full check; anything else (NaN, a list, a
-    shape to broadcast, an infinity) goes through :func:`measurement_for_step`,
-    which raises the errors.
+    The bounds are checked on Python floats (an array reduction costs more
+    than the step's arithmetic); anything else, NaN included, goes through
+    :func:`measurement_for_step`, which raises the errors.
     """
-    if type(z) is not np.ndarray or z.dtype != np.float64 or z.shape[:-1] != batch:
+    if batch not in _ONE_RUN or type(z) is not np.ndarray or z.dtype != np.float64 or z.shape[:-1] != batch:
         return False
     m = model_dim(measurement)
-    return m is not None and z.shape[-1] == m and bool((np.abs(z) <= MAX_MEASUREMENT).all())
+    return m is not None and z.shape[-1] == m and all(-MAX_MEASUREMENT <= v <= MAX_MEASUREMENT for v in z.ravel().tolist())
 
 
 @lru_cache(maxsize=16)
@@ -624,9 +624,21 @@ def _eye(n: int) -> np.ndarray:
     return out
 
 
+@lru_cache(maxsize=16)
+def _halves(n: int) -> np.ndarray:
+    out = np.full((n, n), 0.5)
+    out.flags.writeable = False
+    return out
+
+
 def _sym(A: np.ndarray) -> np.ndarray:
-    """:func:`pursuit._linalg.symmetrize` of one matrix."""
-    return 0.5 * (A + A.T)
+    """:func:`pursuit._linalg.symmetrize` of one matrix, bit for bit.
+
+    The transpose is copied first and the half is an array: a ufunc mixing C
+    and Fortran order, or taking a Python scalar, costs several times the
+    arithmetic on a small matrix.
+    """
+    return (A + A.T.copy()) * _halves(A.shape[0])
 
 
 def _one_run_update(x_pred, P_pred, z, meas: _Measured, measurement, k):
@@ -664,7 +676,9 @@ def _one_run_update(x_pred, P_pred, z, meas: _Measured, measurement, k):
             AL = A.dot(L)
             cov = AL.dot(AL.T)
         cov = cov + K.dot(R).dot(K.T)
-    nis = float(nu.dot(S_inv).dot(nu))
+    v = nu.tolist()
+    w = S_inv.ravel().tolist()
+    nis = sum(v[i] * w[i * m + j] * v[j] for i in range(m) for j in range(m))
     return x_pred + K.dot(nu), _sym(cov), nu, S, nis, -0.5 * (nis + logdet + m * _LOG_2PI)
 
 
@@ -955,7 +969,7 @@ class _SigmaPointFilter(_GaussianFilter):
             if wm.shape[0] % 2:  # an odd count carries the centre point first
                 unit.insert(0, np.zeros((1, n)))
             root = np.sqrt(wc)[:, None] if np.all(wc >= 0) else None
-            cache = (n, wm, wc, np.vstack(unit), root)
+            cache = (n, wm, wc[:, None], np.vstack(unit), root)
             object.__setattr__(self, "_one_run_points", cache)  # per filter and state size: not a field
         _, wm, wc, xi, root = cache
         L = small_cholesky(P)
@@ -968,12 +982,12 @@ class _SigmaPointFilter(_GaussianFilter):
         Q = np.asarray(call_with_dt(self.motion.cov, k, dt=dt), dtype=float)
         if pts is None or Q.ndim != 2:
             return None
-        chi, wm, wc, _, _, _ = pts
+        chi, wm, wc, _, _, _ = pts  # wc as a column (p, 1)
         Y = np.asarray(call_with_dt(self.motion.f, chi, k, dt=dt), dtype=float)
         mean = wm.dot(Y)
         dY = Y - mean
         dX = chi - x
-        return _Prediction(mean, _sym((dY.T * wc).dot(dY)), Q, (dX.T * wc).dot(dY))
+        return _Prediction(mean, _sym((dY * wc).T.dot(dY)), Q, (dX * wc).T.dot(dY))
 
     def _measure_one(self, x_pred, P_pred, k):
         pts = self._points_one(x_pred, P_pred)
@@ -985,10 +999,10 @@ class _SigmaPointFilter(_GaussianFilter):
         zp = Z0[0] + wm.dot(_residual(self.measurement, Z, Z0))
         dZ = _residual(self.measurement, Z, zp)
         dX = chi - x_pred
-        G = (xi.T * wc).dot(dZ)
+        G = (xi * wc).T.dot(dZ)
         E = dZ - xi.dot(G)
         return _Measured(
-            zp, (dZ.T * wc).dot(dZ), (dX.T * wc).dot(dZ), None, None, (E.T * wc).dot(E), L, G, None if root is None else E * root
+            zp, (dZ * wc).T.dot(dZ), (dX * wc).T.dot(dZ), None, None, (E * wc).T.dot(E), L, G, None if root is None else E * root
         )
 
     def _linearize(self, pred, k):
