@@ -1,4 +1,4 @@
-"""One run at a time: µs per `step` of one run stepped from Python, against FilterPy and `particles`.
+"""One run at a time: pursuit's `step` called from Python for one run, against FilterPy and `particles`.
 
 Work (the same model and measurements for every implementation; one run of
 T = 2000 steps, the time per step is the median of ``REPEATS`` passes):
@@ -19,8 +19,11 @@ T = 2000 steps, the time per step is the median of ``REPEATS`` passes):
 pursuit's rows call ``state, info = filt.step(state, z)`` once per step,
 from Python, with batch ``()`` (one run, no batch axis) and ``(1,)``.
 ``ratio`` is the peer's µs per step divided by the row's: above 1 the row
-is faster than the peer.  Compiled rows come from
-``benchmarks/_online_compiled.py`` (its ``rows()``) where that module exists.
+is faster than the peer.  Each pursuit pass takes turns with its peer's
+pass (:func:`interleaved_us`), so a drifting load on a shared machine hits
+both.  Compiled rows come from ``benchmarks/_online_compiled.py`` (its
+``rows(steps=, repeats=)``, which may call :func:`rows` with its backend)
+where that module exists.
 
 Run::
 
@@ -58,18 +61,24 @@ ANCHORS = np.array([[0.0, 0.0], [100.0, 0.0], [0.0, 100.0]])
 SIG_ANCHOR = 2.0
 PARTICLES = 1000
 
-Row = tuple[str, str, float, float | None]  # (name, backend, µs per step, ratio to the peer)
+Row = tuple[str, str, float, float | None]  # (name, backend, µs per step, peer µs / row µs)
+Maker = Callable[[], Callable[[], object]]  # builds a fresh pass (not timed); the pass is timed
 
 
-def per_step_us(make: Callable[[], Callable[[], object]], steps: int, repeats: int = REPEATS) -> float:
-    """Median over ``repeats`` passes of the µs per step; ``make()`` builds a fresh pass (not timed)."""
-    times = []
+def interleaved_us(passes: dict[str, tuple[Maker, int]], repeats: int = REPEATS) -> dict[str, float]:
+    """Median µs per step of each pass, the passes taking turns in every round.
+
+    Taking turns keeps a ratio fair on a shared machine whose load drifts
+    during the run.  ``passes`` maps a name to ``(make, steps of one pass)``.
+    """
+    times: dict[str, list[float]] = {name: [] for name in passes}
     for _ in range(repeats):
-        go = make()
-        t0 = time.perf_counter()
-        go()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times) / steps * 1e6
+        for name, (make, steps) in passes.items():
+            go = make()
+            t0 = time.perf_counter()
+            go()
+            times[name].append((time.perf_counter() - t0) / steps * 1e6)
+    return {name: statistics.median(ts) for name, ts in times.items()}
 
 
 # -- work ---------------------------------------------------------------------
@@ -102,6 +111,11 @@ def rb_work(steps: int):
     return mot, meas, zs
 
 
+def pf_steps(steps: int) -> int:
+    """Steps of a PF pass: N = 1000 particles cost a few hundred µs a step, so a tenth of the steps."""
+    return max(steps // 10, 50)
+
+
 def pf_work(steps: int):
     from pursuit.models import RangeSensors
 
@@ -113,10 +127,11 @@ def pf_work(steps: int):
 
 
 PRIOR_COV = np.diag([25.0, 1.0, 25.0, 1.0])
+KINDS = ("kf", "ekf", "ukf", "pf")
 
 
 # -- pursuit ---------------------------------------------------------------------
-def _pursuit_pass(filt, zs, prior, batch, rng=None):
+def _pursuit_pass(filt, zs, prior, batch, rng=None) -> Maker:
     def make():
         state = filt.init(prior, batch=batch, rng=rng)
         z_steps = [np.broadcast_to(z, (*batch, z.shape[-1])) for z in zs]
@@ -131,45 +146,41 @@ def _pursuit_pass(filt, zs, prior, batch, rng=None):
     return make
 
 
-KINDS = ("kf", "ekf", "ukf", "pf")
-
-
-def pursuit_kind_rows(kind: str, backend: str, steps: int = STEPS, repeats: int = REPEATS) -> list[tuple[str, float]]:
-    """(name, µs per step) of one kind (``"kf"``, ``"ekf"``, ``"ukf"``, ``"pf"``) computing with ``backend``."""
+def pursuit_passes(kind: str, backend: str, steps: int = STEPS) -> dict[str, tuple[Maker, int]]:
+    """Passes of pursuit's filter of ``kind`` (``"kf"``, ``"ekf"``, ``"ukf"``, ``"pf"``) computing with ``backend``."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # a fallback warning: the backend column says what ran
+        if kind == "pf":
+            mot, meas, zs, x0 = pf_work(steps)
+            pf = pu.BootstrapParticleFilter(mot, meas, particles=PARTICLES, backend=backend)
+            n = pf_steps(steps)
+            make = _pursuit_pass(pf, zs[:n], pu.Gaussian(x0, PRIOR_COV), (1,), np.random.default_rng(0))
+            return {f"pursuit PF N={PARTICLES}, batch (1,)": (make, n)}
         if kind == "kf":
             mot, meas, zs = kf_work(steps)
             prior = pu.Gaussian(np.zeros(4), np.eye(4))
-            filt = pu.KalmanFilter(mot, meas, backend=backend)
-            label = "KF"
-        elif kind in ("ekf", "ukf"):
+            filt, label = pu.KalmanFilter(mot, meas, backend=backend), "KF"
+        else:
             mot, meas, zs = rb_work(steps)
             prior = pu.Gaussian(np.array([0.0, 1.0, 0.0, 0.5]), np.eye(4))
             cls = pu.ExtendedKalmanFilter if kind == "ekf" else pu.UnscentedKalmanFilter
-            filt = cls(mot, meas, backend=backend)
-            label = f"{kind.upper()} range-bearing"
-        else:
-            mot, meas, zs, x0 = pf_work(steps)
-            pf = pu.BootstrapParticleFilter(mot, meas, particles=PARTICLES, backend=backend)
-            prior = pu.Gaussian(x0, PRIOR_COV)
-            pf_steps = max(steps // 10, 50)  # N = 1000 particles: a tenth of the steps keeps the pass short
-            make = _pursuit_pass(pf, zs[:pf_steps], prior, (1,), np.random.default_rng(0))
-            return [(f"PF N={PARTICLES}, batch (1,)", per_step_us(make, pf_steps, repeats))]
-        return [
-            (f"{label}, batch {batch}", per_step_us(_pursuit_pass(filt, zs, prior, batch), steps, repeats))
-            for batch in ((), (1,))
-        ]
-
-
-def pursuit_rows(backend: str, steps: int = STEPS, repeats: int = REPEATS) -> list[tuple[str, float]]:
-    """(name, µs per step) for pursuit's filters computing with ``backend``, one run stepped from Python."""
-    return [row for kind in KINDS for row in pursuit_kind_rows(kind, backend, steps, repeats)]
+            filt, label = cls(mot, meas, backend=backend), f"{kind.upper()} range-bearing"
+    return {f"pursuit {label}, batch {batch}": (_pursuit_pass(filt, zs, prior, batch), steps) for batch in ((), (1,))}
 
 
 # -- peers ------------------------------------------------------------------------
-def filterpy_us(kind: str, steps: int = STEPS, repeats: int = REPEATS) -> float | None:
-    """µs per FilterPy ``predict(); update(z)`` on the same work (None if FilterPy is not installed)."""
+PEER_LABELS = {
+    "kf": "FilterPy KalmanFilter",
+    "ekf": "FilterPy ExtendedKalmanFilter",
+    "ukf": "FilterPy UnscentedKalmanFilter (Merwe points)",
+    "pf": "particles SMC(Bootstrap), next(alg)",
+}
+
+
+def peer_pass(kind: str, steps: int = STEPS) -> tuple[Maker, int] | None:
+    """The peer's pass on the same work: FilterPy ``predict(); update(z)``, or ``particles`` advanced with ``next(alg)``; None if not installed."""
+    if kind == "pf":
+        return _particles_pass(steps)
     try:
         from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
     except ImportError:
@@ -194,7 +205,7 @@ def filterpy_us(kind: str, steps: int = STEPS, repeats: int = REPEATS) -> float 
 
             return go
 
-        return per_step_us(make, steps, repeats)
+        return make, steps
     mot, meas, zs = rb_work(steps)
     F = np.array(mot.transition_matrix())
     x0 = np.array([0.0, 1.0, 0.0, 0.5])
@@ -225,7 +236,7 @@ def filterpy_us(kind: str, steps: int = STEPS, repeats: int = REPEATS) -> float 
 
             return go
 
-        return per_step_us(make, steps, repeats)
+        return make, steps
 
     def fx(x, dt):
         return F @ x
@@ -245,11 +256,10 @@ def filterpy_us(kind: str, steps: int = STEPS, repeats: int = REPEATS) -> float 
 
         return go
 
-    return per_step_us(make, steps, repeats)
+    return make, steps
 
 
-def particles_us(steps: int = STEPS, repeats: int = REPEATS) -> float | None:
-    """µs per step of ``particles`` (Chopin) advanced one step at a time with ``next(alg)`` (None if not installed)."""
+def _particles_pass(steps: int) -> tuple[Maker, int] | None:
     try:
         import particles
         from particles import distributions as dists
@@ -257,7 +267,7 @@ def particles_us(steps: int = STEPS, repeats: int = REPEATS) -> float | None:
     except ImportError:
         return None
     mot, meas, zs, x0 = pf_work(steps)
-    pf_steps = max(steps // 10, 50)
+    n = pf_steps(steps)
     F = np.asarray(mot.transition_matrix())
     G = np.asarray(mot.noise_factor())  # Q = G Gᵀ is singular (discrete white-noise acceleration)
     R = SIG_ANCHOR**2 * np.eye(len(ANCHORS))
@@ -283,43 +293,42 @@ def particles_us(steps: int = STEPS, repeats: int = REPEATS) -> float | None:
             ranges = np.sqrt(((pos[:, None, :] - ANCHORS[None, :, :]) ** 2).sum(-1))
             return dists.MvNormal(loc=ranges, cov=R)
 
-    data = list(zs[:pf_steps])
+    data = list(zs[:n])
 
     def make():
         fk = ssm.Bootstrap(ssm=RangeCV(), data=data)
         alg = particles.SMC(fk=fk, N=PARTICLES, resampling="systematic", ESSrmin=1.0, store_history=False, collect=None)
 
         def go():
-            for _ in range(pf_steps):
+            for _ in range(n):
                 next(alg)
 
         return go
 
-    return per_step_us(make, pf_steps, repeats)
+    return make, n
 
 
 # -- the table ----------------------------------------------------------------------
-def _peer_of(name: str) -> str:
-    return name.split(" ")[0].rstrip(",")
+def rows(
+    backend: str = "numpy", steps: int = STEPS, repeats: int = REPEATS, peers: dict[str, float | None] | None = None
+) -> list[Row]:
+    """``(name, backend, µs per step, peer µs / row µs)`` of pursuit computing with ``backend``, every kind.
 
-
-def peer_rows(steps: int = STEPS, repeats: int = REPEATS) -> dict[str, tuple[str, float | None]]:
-    """The peer of each kind (``KF``, ``EKF``, ``UKF``, ``PF``): (label, µs per step or None)."""
-    return {
-        "KF": ("FilterPy KalmanFilter", filterpy_us("kf", steps, repeats)),
-        "EKF": ("FilterPy ExtendedKalmanFilter", filterpy_us("ekf", steps, repeats)),
-        "UKF": ("FilterPy UnscentedKalmanFilter (Merwe points)", filterpy_us("ukf", steps, repeats)),
-        "PF": ("particles SMC(Bootstrap), next(alg)", particles_us(steps, repeats)),
-    }
-
-
-def rows(backend: str = "numpy", steps: int = STEPS, repeats: int = REPEATS, peers: dict | None = None) -> list[Row]:
-    """(name, backend, µs per step, peer µs / row µs) for pursuit with ``backend``; ``peers`` from :func:`peer_rows`."""
-    peers = peer_rows(steps, repeats) if peers is None else peers
-    out = []
-    for name, us in pursuit_rows(backend, steps, repeats):
-        ref = peers[_peer_of(name)][1]
-        out.append((f"pursuit {name}", backend, us, ref / us if ref else None))
+    Each kind's pursuit passes take turns with the peer's pass
+    (:func:`interleaved_us`); the peer's µs per step are written into
+    ``peers`` (kind → µs, None when not installed) when a dict is given.
+    """
+    out: list[Row] = []
+    for kind in KINDS:
+        passes = pursuit_passes(kind, backend, steps)
+        peer = peer_pass(kind, steps)
+        if peer is not None:
+            passes["peer"] = peer
+        us = interleaved_us(passes, repeats)
+        ref = us.pop("peer", None)
+        if peers is not None:
+            peers[kind] = ref
+        out += [(name, backend, v, ref / v if ref else None) for name, v in us.items()]
     return out
 
 
@@ -332,18 +341,23 @@ def table(all_rows: list[Row]) -> str:
 
 def main(quick: bool = False) -> list[Row]:
     steps, repeats = (200, 3) if quick else (STEPS, REPEATS)
-    peers = peer_rows(steps, repeats)
-    all_rows: list[Row] = []
-    for label, us in peers.values():
-        all_rows.append((label, "peer", us, 1.0) if us is not None else (label, "not installed", float("nan"), None))
-    all_rows += rows("numpy", steps, repeats, peers)
+    peers: dict[str, float | None] = {}
+    mine = rows("numpy", steps, repeats, peers)
+    all_rows: list[Row] = [
+        (PEER_LABELS[kind], "peer", us, 1.0) if us is not None else (PEER_LABELS[kind], "not installed", float("nan"), None)
+        for kind, us in peers.items()
+    ]
+    all_rows += mine
     try:
         import _online_compiled  # the compiled rows (benchmarks/_online_compiled.py), where present
     except ImportError:
         _online_compiled = None
     if _online_compiled is not None:
-        all_rows += _online_compiled.rows(steps=steps, repeats=repeats, peers=peers)
-    print(f"One run, {steps} steps (PF: {max(steps // 10, 50)}), median of {repeats} passes; one core.\n")
+        all_rows += _online_compiled.rows(steps=steps, repeats=repeats)
+    print(
+        f"One run, {steps} steps (PF: {pf_steps(steps)}), N = {PARTICLES} particles; median of {repeats} passes, "
+        "each pursuit pass taking turns with its peer's; one core.\n"
+    )
     print(table(all_rows))
     return all_rows
 

@@ -16,7 +16,6 @@ chosen for two properties the rest of pursuit relies on:
 
 from __future__ import annotations
 
-import math
 from typing import Callable
 
 import numpy as np
@@ -316,8 +315,8 @@ def small_inv_logdet(S: np.ndarray) -> tuple[np.ndarray, float] | None:
     """``(S⁻¹, log det S)`` of one symmetric positive-definite matrix of size 1 to 3, or None.
 
     ``S`` is ``(m, m)`` or ``(1, m, m)``; the inverse has its shape.  The
-    closed forms and their operation order are those of :func:`inv_spd` (so
-    the inverse agrees with it bit for bit); None where those closed forms
+    closed forms and their operation order are those of :func:`inv_spd` and
+    :func:`logdet_spd` (so both agree with them bit for bit); None where those closed forms
     hand over to LAPACK (size above 3, or a determinant below
     ``_CLOSED_FORM_MIN_RATIO`` times the product of the diagonal, which also
     catches a non-positive or NaN determinant): the caller then uses
@@ -329,7 +328,7 @@ def small_inv_logdet(S: np.ndarray) -> tuple[np.ndarray, float] | None:
         a = s[0]
         if not a > 0.0:
             return None
-        return np.array(1.0 / a).reshape(S.shape), math.log(a)
+        return np.array(1.0 / a).reshape(S.shape), float(np.log(a))
     if m == 2:
         a, b, c, d = s
         det = a * d - b * c
@@ -342,7 +341,10 @@ def small_inv_logdet(S: np.ndarray) -> tuple[np.ndarray, float] | None:
         c01 = a12 * a20 - a10 * a22
         c02 = a10 * a21 - a11 * a20
         det = a00 * c00 + a01 * c01 + a02 * c02
-        if not det > _CLOSED_FORM_MIN_RATIO * (a00 * a11 * a22):
+        scale = _CLOSED_FORM_MIN_RATIO * (a00 * a11 * a22)
+        # logdet_spd expands the determinant along the first row in its own order: the same bits
+        det_log = a00 * (a11 * a22 - a12 * a21) - a01 * (a10 * a22 - a12 * a20) + a02 * (a10 * a21 - a11 * a20)
+        if not (det > scale and det_log > scale):
             return None
         inv = [
             c00 / det, (a02 * a21 - a01 * a22) / det, (a01 * a12 - a02 * a11) / det,
@@ -351,7 +353,8 @@ def small_inv_logdet(S: np.ndarray) -> tuple[np.ndarray, float] | None:
         ]  # fmt: skip
     else:
         return None
-    return np.array(inv).reshape(S.shape), math.log(det)
+    # np.log, not math.log: the bits of logdet_spd (NumPy's SIMD log may differ from libm's in the last bit)
+    return np.array(inv).reshape(S.shape), float(np.log(det_log if m == 3 else det))
 
 
 def small_cholesky(P: np.ndarray) -> np.ndarray | None:

@@ -354,18 +354,27 @@ class _GaussianFilter(FilterBase):
         k = state.k + 1 if k is None else int(k)
         dt = time_step(dt, k)
         batch = state.batch
-        if not _checked_measurement(z, batch, self.measurement):  # the cheap check of one run, else the full one
+        complete = _checked_measurement(z, batch, self.measurement)  # the cheap check of one run, else the full one
+        if not complete:
             z = measurement_for_step(z, batch, self._measurement_dim(), k)
         if self._specs is not None and len(batch) <= 1:
             return self._compiled_step(state, z, k, dt)
-        if batch in _ONE_RUN and type(self) in _ONE_RUN_TYPES and type(self.fading) is Constant:
-            out = self._one_run_step(state, z, k, dt)
+        # One run on one matrix: batch (), or (1,) with a shared covariance.  A (1,) state with a covariance of
+        # its own (an IMM's mixture, a multi-target gather) keeps the general step, whose bits equal those of
+        # the same run in a larger batch.
+        if (
+            batch in _ONE_RUN
+            and type(self) in _ONE_RUN_TYPES
+            and type(self.fading) is Constant
+            and (not batch or is_shared(state.cov, 2))
+        ):
+            out = self._one_run_step(state, z, k, dt, complete)
             if out is not None:
                 return out
         return self.numpy_step(state, z, k, dt)
 
     def _one_run_step(
-        self, state: GaussianState, z: np.ndarray, k: int, dt: float | None
+        self, state: GaussianState, z: np.ndarray, k: int, dt: float | None, complete: bool = False
     ) -> tuple[GaussianState, dict[str, np.ndarray]] | None:
         """:meth:`numpy_step` for one run (batch ``()`` or ``(1,)``) and a constant fading factor, or None.
 
@@ -377,7 +386,8 @@ class _GaussianFilter(FilterBase):
         dtypes.  None where the general step must decide: some but not all
         components of ``z`` missing, a covariance that needs a repair, a
         model that returns batched matrices for one state; the caller then
-        runs :meth:`numpy_step`.
+        runs :meth:`numpy_step`.  ``complete``: ``z`` is known to have no
+        missing component.
         """
         batch = state.batch
         x, P, z1 = (state.mean[0], state.cov[0], z[0]) if batch else (state.mean, state.cov, z)
@@ -390,7 +400,7 @@ class _GaussianFilter(FilterBase):
         if meas is None:
             return None
         m = z1.shape[0]
-        missing = sum(v != v for v in z1.tolist())  # NaN components
+        missing = 0 if complete else int(np.isnan(z1).sum())
         if not missing:
             out = _one_run_update(pred.mean, P_pred, z1, meas, self.measurement, k)
             if out is None:
@@ -609,12 +619,17 @@ def _checked_measurement(z: Any, batch: tuple[int, ...], measurement: Any) -> bo
 
     The bounds are checked on Python floats (an array reduction costs more
     than the step's arithmetic); anything else, NaN included, goes through
-    :func:`measurement_for_step`, which raises the errors.
+    :func:`measurement_for_step`, which raises the errors.  True means no
+    component is missing.
     """
     if batch not in _ONE_RUN or type(z) is not np.ndarray or z.dtype != np.float64 or z.shape[:-1] != batch:
         return False
     m = model_dim(measurement)
-    return m is not None and z.shape[-1] == m and all(-MAX_MEASUREMENT <= v <= MAX_MEASUREMENT for v in z.ravel().tolist())
+    if m is None or z.shape[-1] != m:
+        return False
+    values = z.ravel().tolist()
+    total = sum(values)
+    return total - total == 0.0 and max(map(abs, values)) <= MAX_MEASUREMENT  # the first is False for NaN or ±inf
 
 
 @lru_cache(maxsize=16)
@@ -676,9 +691,7 @@ def _one_run_update(x_pred, P_pred, z, meas: _Measured, measurement, k):
             AL = A.dot(L)
             cov = AL.dot(AL.T)
         cov = cov + K.dot(R).dot(K.T)
-    v = nu.tolist()
-    w = S_inv.ravel().tolist()
-    nis = sum(v[i] * w[i * m + j] * v[j] for i in range(m) for j in range(m))
+    nis = float(quad(nu, S_inv))  # the general step's einsum: the same bits, which an IMM's mode weights amplify
     return x_pred + K.dot(nu), _sym(cov), nu, S, nis, -0.5 * (nis + logdet + m * _LOG_2PI)
 
 
