@@ -28,6 +28,7 @@ where that module exists.
 Run::
 
     PYTHONPATH=src taskset -c 1 .bench-venv/bin/python benchmarks/bench_online.py
+    PYTHONPATH=src taskset -c 1 .bench-venv/bin/python benchmarks/bench_online.py --ab   # one-run path vs general step
     .bench-venv/bin/python benchmarks/run.py --only online
 """
 
@@ -339,6 +340,46 @@ def table(all_rows: list[Row]) -> str:
     return "\n".join(lines)
 
 
+def ab_rows(steps: int = 500, repeats: int = 5) -> list[Row]:
+    """The one-run path of the Gaussian filters against their general step, with the same filters (``--ab``).
+
+    The general-step rows switch the one-run path off (the private
+    ``pursuit.filters.gaussian._ONE_RUN_TYPES`` emptied for the pass); all
+    passes of a kind, FilterPy's included, take turns.
+    """
+    from pursuit.filters import gaussian
+
+    def general(make: Maker) -> Maker:
+        def make_general():
+            go = make()
+
+            def run():
+                saved = gaussian._ONE_RUN_TYPES
+                gaussian._ONE_RUN_TYPES = frozenset()
+                try:
+                    go()
+                finally:
+                    gaussian._ONE_RUN_TYPES = saved
+
+            return run
+
+        return make_general
+
+    out: list[Row] = []
+    for kind in ("kf", "ekf", "ukf"):
+        passes: dict[str, tuple[Maker, int]] = {}
+        for name, (make, n) in pursuit_passes(kind, "numpy", steps).items():
+            passes[f"{name}, one-run path"] = (make, n)
+            passes[f"{name}, general step"] = (general(make), n)
+        peer = peer_pass(kind, steps)
+        if peer is not None:
+            passes[PEER_LABELS[kind]] = peer
+        us = interleaved_us(passes, repeats)
+        ref = us.get(PEER_LABELS[kind])
+        out += [(name, "numpy" if name.startswith("pursuit") else "peer", v, ref / v if ref else None) for name, v in us.items()]
+    return out
+
+
 def main(quick: bool = False) -> list[Row]:
     steps, repeats = (200, 3) if quick else (STEPS, REPEATS)
     peers: dict[str, float | None] = {}
@@ -363,4 +404,7 @@ def main(quick: bool = False) -> list[Row]:
 
 
 if __name__ == "__main__":
-    main(quick="--quick" in sys.argv)
+    if "--ab" in sys.argv:
+        print(table(ab_rows()))
+    else:
+        main(quick="--quick" in sys.argv)

@@ -369,10 +369,10 @@ def small_cholesky(P: np.ndarray) -> np.ndarray | None:
     if _potrf is None:
         from scipy.linalg.lapack import dpotrf as _potrf
     n = P.shape[-1]
-    L, info = _potrf(P.reshape(n, n), lower=1, clean=1)
+    L, info = _potrf(P if P.ndim == 2 else P.reshape(n, n), lower=1, clean=1)
     if info != 0:
         return None
-    return L.reshape(P.shape)
+    return L if P.ndim == 2 else L.reshape(P.shape)
 
 
 _potrf = None  # scipy.linalg.lapack.dpotrf, imported on first use

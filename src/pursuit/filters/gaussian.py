@@ -68,7 +68,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Any, ClassVar, Sequence
+from typing import Any, ClassVar, NamedTuple, Sequence
 
 import numpy as np
 
@@ -224,6 +224,28 @@ class _Measured:
     L: np.ndarray | None = None  # Cholesky factor of P⁻ the points were drawn with (χ = x⁻ + L ξ)
     G: np.ndarray | None = None  # L⁻¹ Pxz = (H L)ᵀ, summed from the points (no solve with L)
     E: np.ndarray | None = None  # rows √wc_i e_iᵀ with D = Eᵀ E; None when a weight wc is negative
+
+
+class _OnePrediction(NamedTuple):
+    """:class:`_Prediction` of one run on 2-D arrays (a tuple: a frozen dataclass costs microseconds to build)."""
+
+    mean: np.ndarray  # (n,)
+    propagated: np.ndarray  # (n, n)
+    Q: np.ndarray
+    cross: np.ndarray
+
+
+class _OneMeasured(NamedTuple):
+    """:class:`_Measured` of one run on 2-D arrays."""
+
+    zp: np.ndarray
+    Pzz: np.ndarray
+    Pxz: np.ndarray
+    H: np.ndarray | None
+    D: np.ndarray | None = None
+    L: np.ndarray | None = None
+    G: np.ndarray | None = None
+    E: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -424,17 +446,16 @@ class _GaussianFilter(FilterBase):
                 P_out, cross = P_pred[None], cross[None]
         else:
             pred_mean = pred.mean
-        one = np.array
         info = {
             "innovation": nu,
             "S": S,
-            "nis": one([nis] if batch else nis),
-            "dof": one([dof] if batch else dof),
-            "loglik": one([loglik] if batch else loglik),
-            "fading": one([float(lam)] if batch else float(lam)),
-            "faded": one([lam > 1.0] if batch else lam > 1.0),
-            "repaired": one([False] if batch else False),
-            "gated": one([gated] if batch else gated),
+            "nis": np.array([nis] if batch else nis),
+            "dof": _constant(dof, batch),
+            "loglik": np.array([loglik] if batch else loglik),
+            "fading": _constant(float(lam), batch),
+            "faded": _constant(lam > 1.0, batch),
+            "repaired": _constant(False, batch),
+            "gated": _constant(bool(gated), batch),
             "pred_mean": pred_mean,
             "pred_cov": P_out,
             "cross_cov": cross,
@@ -445,10 +466,10 @@ class _GaussianFilter(FilterBase):
     _one_run_shares_pred: ClassVar[bool] = False
     """Whether the general step keeps pred_cov and cross_cov unbatched, ``(n, n)``, while the state's covariance is shared (the KF)."""
 
-    def _predict_one(self, x: np.ndarray, P: np.ndarray, k: int, dt: float | None) -> _Prediction | None:
+    def _predict_one(self, x: np.ndarray, P: np.ndarray, k: int, dt: float | None) -> _OnePrediction | None:
         raise NotImplementedError
 
-    def _measure_one(self, x_pred: np.ndarray, P_pred: np.ndarray, k: int) -> _Measured | None:
+    def _measure_one(self, x_pred: np.ndarray, P_pred: np.ndarray, k: int) -> _OneMeasured | None:
         raise NotImplementedError
 
     def numpy_step(
@@ -632,6 +653,14 @@ def _checked_measurement(z: Any, batch: tuple[int, ...], measurement: Any) -> bo
     return total - total == 0.0 and max(map(abs, values)) <= MAX_MEASUREMENT  # the first is False for NaN or ±inf
 
 
+@lru_cache(maxsize=256, typed=True)  # typed: 0 and False are different arrays
+def _constant(value: Any, batch: tuple[int, ...]) -> np.ndarray:
+    """A read-only ``batch``-shaped array of ``value`` (``dof``, ``fading``, the flags), made once: steps share it."""
+    out = np.array([value] if batch else value)
+    out.flags.writeable = False
+    return out
+
+
 @lru_cache(maxsize=16)
 def _eye(n: int) -> np.ndarray:
     out = np.eye(n)
@@ -656,7 +685,7 @@ def _sym(A: np.ndarray) -> np.ndarray:
     return (A + A.T.copy()) * _halves(A.shape[0])
 
 
-def _one_run_update(x_pred, P_pred, z, meas: _Measured, measurement, k):
+def _one_run_update(x_pred, P_pred, z, meas: _OneMeasured, measurement, k):
     """:func:`_update` and :func:`_gain_and_cov` for one run with every component measured, on 2-D arrays.
 
     Returns ``(mean, cov, ν, S, nis, loglik)`` with NIS and the
@@ -691,7 +720,8 @@ def _one_run_update(x_pred, P_pred, z, meas: _Measured, measurement, k):
             AL = A.dot(L)
             cov = AL.dot(AL.T)
         cov = cov + K.dot(R).dot(K.T)
-    nis = float(quad(nu, S_inv))  # the general step's einsum: the same bits, which an IMM's mode weights amplify
+    v, w = nu.tolist(), S_inv.ravel().tolist()
+    nis = sum([v[i] * w[i * m + j] * v[j] for i in range(m) for j in range(m)])
     return x_pred + K.dot(nu), _sym(cov), nu, S, nis, -0.5 * (nis + logdet + m * _LOG_2PI)
 
 
@@ -842,14 +872,14 @@ class ExtendedKalmanFilter(_GaussianFilter):
         if F.ndim != 2 or Q.ndim != 2:
             return None
         PFt = P.dot(F.T)
-        return _Prediction(np.asarray(call_with_dt(self.motion.f, x, k, dt=dt), dtype=float), F.dot(PFt), Q, PFt)
+        return _OnePrediction(np.asarray(call_with_dt(self.motion.f, x, k, dt=dt), dtype=float), F.dot(PFt), Q, PFt)
 
     def _measure_one(self, x_pred, P_pred, k):
         H = measurement_jacobian(self.measurement, x_pred, k)
         if H.ndim != 2:
             return None
         PHt = P_pred.dot(H.T)
-        return _Measured(np.asarray(self.measurement.h(x_pred, k), dtype=float), H.dot(PHt), PHt, H)
+        return _OneMeasured(np.asarray(self.measurement.h(x_pred, k), dtype=float), H.dot(PHt), PHt, H)
 
 
 @dataclass(frozen=True)
@@ -897,12 +927,12 @@ class KalmanFilter(ExtendedKalmanFilter):
         if Q.ndim != 2:
             return None
         PFt = P.dot(F.T)
-        return _Prediction(F.dot(x), F.dot(PFt), Q, PFt)
+        return _OnePrediction(F.dot(x), F.dot(PFt), Q, PFt)
 
     def _measure_one(self, x_pred, P_pred, k):
         H = np.asarray(self.measurement.matrix(k), dtype=float)
         PHt = P_pred.dot(H.T)
-        return _Measured(H.dot(x_pred), H.dot(PHt), PHt, H)
+        return _OneMeasured(H.dot(x_pred), H.dot(PHt), PHt, H)
 
 
 
@@ -1000,7 +1030,7 @@ class _SigmaPointFilter(_GaussianFilter):
         mean = wm.dot(Y)
         dY = Y - mean
         dX = chi - x
-        return _Prediction(mean, _sym((dY * wc).T.dot(dY)), Q, (dX * wc).T.dot(dY))
+        return _OnePrediction(mean, _sym((dY * wc).T.dot(dY)), Q, (dX * wc).T.dot(dY))
 
     def _measure_one(self, x_pred, P_pred, k):
         pts = self._points_one(x_pred, P_pred)
@@ -1014,9 +1044,7 @@ class _SigmaPointFilter(_GaussianFilter):
         dX = chi - x_pred
         G = (xi * wc).T.dot(dZ)
         E = dZ - xi.dot(G)
-        return _Measured(
-            zp, (dZ * wc).T.dot(dZ), (dX * wc).T.dot(dZ), None, None, (E * wc).T.dot(E), L, G, None if root is None else E * root
-        )
+        return _OneMeasured(zp, (dZ * wc).T.dot(dZ), (dX * wc).T.dot(dZ), None, (E * wc).T.dot(E), L, G, None if root is None else E * root)
 
     def _linearize(self, pred, k):
         # Statistical linearisation about the unfaded prediction P̄ + Q:
