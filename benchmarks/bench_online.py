@@ -179,7 +179,10 @@ PEER_LABELS = {
 
 
 def peer_pass(kind: str, steps: int = STEPS) -> tuple[Maker, int] | None:
-    """The peer's pass on the same work: FilterPy ``predict(); update(z)``, or ``particles`` advanced with ``next(alg)``; None if not installed."""
+    """The peer's pass on the same work, or None if not installed.
+
+    FilterPy ``predict(); update(z)``, or ``particles`` advanced with ``next(alg)``.
+    """
     if kind == "pf":
         return _particles_pass(steps)
     try:
