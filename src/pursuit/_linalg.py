@@ -31,6 +31,8 @@ __all__ = [
     "psd_factor",
     "numerical_jacobian",
     "is_shared",
+    "small_inv_logdet",
+    "small_cholesky",
 ]
 
 
@@ -299,3 +301,78 @@ def is_shared(A: np.ndarray, core_ndim: int) -> bool:
     """
     lead = A.ndim - core_ndim
     return lead == 0 or all(s == 0 for s in A.strides[:lead])
+
+
+# --------------------------------------------------------------------------
+# one small matrix at a time (the step of a single run)
+# --------------------------------------------------------------------------
+# On one small matrix a call through numpy.linalg costs several microseconds of
+# wrapper (error-state context, gufunc dispatch), more than the arithmetic.
+# Used by the Gaussian filters' step of one run, never on batches.
+
+
+def small_inv_logdet(S: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """``(S⁻¹, log det S)`` of one symmetric positive-definite matrix of size 1 to 3, or None.
+
+    ``S`` is ``(m, m)`` or ``(1, m, m)``; the inverse has its shape.  The
+    closed forms and their operation order are those of :func:`inv_spd` and
+    :func:`logdet_spd` (so both agree with them bit for bit); None where those closed forms
+    hand over to LAPACK (size above 3, or a determinant below
+    ``_CLOSED_FORM_MIN_RATIO`` times the product of the diagonal, which also
+    catches a non-positive or NaN determinant): the caller then uses
+    :func:`inv_spd` and :func:`logdet_spd`.
+    """
+    m = S.shape[-1]
+    s = S.ravel().tolist()
+    if m == 1:
+        a = s[0]
+        if not a > 0.0:
+            return None
+        return np.array(1.0 / a).reshape(S.shape), float(np.log(a))
+    if m == 2:
+        a, b, c, d = s
+        det = a * d - b * c
+        if not det > _CLOSED_FORM_MIN_RATIO * (a * d):
+            return None
+        inv = [d / det, -b / det, -c / det, a / det]
+    elif m == 3:
+        a00, a01, a02, a10, a11, a12, a20, a21, a22 = s
+        c00 = a11 * a22 - a12 * a21
+        c01 = a12 * a20 - a10 * a22
+        c02 = a10 * a21 - a11 * a20
+        det = a00 * c00 + a01 * c01 + a02 * c02
+        scale = _CLOSED_FORM_MIN_RATIO * (a00 * a11 * a22)
+        # logdet_spd expands the determinant along the first row in its own order: the same bits
+        det_log = a00 * (a11 * a22 - a12 * a21) - a01 * (a10 * a22 - a12 * a20) + a02 * (a10 * a21 - a11 * a20)
+        if not (det > scale and det_log > scale):
+            return None
+        inv = [
+            c00 / det, (a02 * a21 - a01 * a22) / det, (a01 * a12 - a02 * a11) / det,
+            c01 / det, (a00 * a22 - a02 * a20) / det, (a02 * a10 - a00 * a12) / det,
+            c02 / det, (a01 * a20 - a00 * a21) / det, (a00 * a11 - a01 * a10) / det,
+        ]  # fmt: skip
+    else:
+        return None
+    # np.log, not math.log: the bits of logdet_spd (NumPy's SIMD log may differ from libm's in the last bit)
+    return np.array(inv).reshape(S.shape), float(np.log(det_log if m == 3 else det))
+
+
+def small_cholesky(P: np.ndarray) -> np.ndarray | None:
+    """Lower Cholesky factor of one ``(n, n)`` or ``(1, n, n)`` matrix, or None where it is not positive definite.
+
+    LAPACK's ``potrf`` called through ``scipy.linalg.lapack`` (a fraction of
+    the cost of ``np.linalg.cholesky``'s wrapper on one small matrix).  Reads
+    the lower triangle; None where a pivot is not positive or is NaN (where
+    ``np.linalg.cholesky`` raises).
+    """
+    global _potrf
+    if _potrf is None:
+        from scipy.linalg.lapack import dpotrf as _potrf
+    n = P.shape[-1]
+    L, info = _potrf(P if P.ndim == 2 else P.reshape(n, n), lower=1, clean=1)
+    if info != 0:
+        return None
+    return L if P.ndim == 2 else L.reshape(P.shape)
+
+
+_potrf = None  # scipy.linalg.lapack.dpotrf, imported on first use

@@ -67,17 +67,18 @@ predicted mean and covariance unchanged.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from functools import lru_cache
+from typing import Any, ClassVar, NamedTuple, Sequence
 
 import numpy as np
 
-from .._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, mv, quad, symmetrize
-from .._validation import in_range, measurement_for_step, model_dim, nonnegative, prior_of_size, time_step
+from .._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, mv, quad, small_cholesky, small_inv_logdet, symmetrize
+from .._validation import MAX_MEASUREMENT, in_range, measurement_for_step, model_dim, nonnegative, prior_of_size, time_step
 from ..gaussian import Gaussian
 from ..rng import RNGLike
 from .base import FilterBase, as_gaussian, prior_batch
 from .fading import Constant, FadingContext, FadingStrategy, NoFading
-from .gating import apply_gate, keep_prediction
+from .gating import apply_gate, chi2_gate_thresholds, keep_prediction
 from .jacobians import call_with_dt, measurement_jacobian, motion_jacobian
 
 __all__ = [
@@ -225,6 +226,28 @@ class _Measured:
     E: np.ndarray | None = None  # rows √wc_i e_iᵀ with D = Eᵀ E; None when a weight wc is negative
 
 
+class _OnePrediction(NamedTuple):
+    """:class:`_Prediction` of one run on 2-D arrays (a tuple: a frozen dataclass costs microseconds to build)."""
+
+    mean: np.ndarray  # (n,)
+    propagated: np.ndarray  # (n, n)
+    Q: np.ndarray
+    cross: np.ndarray
+
+
+class _OneMeasured(NamedTuple):
+    """:class:`_Measured` of one run on 2-D arrays."""
+
+    zp: np.ndarray
+    Pzz: np.ndarray
+    Pxz: np.ndarray
+    H: np.ndarray | None
+    D: np.ndarray | None = None
+    L: np.ndarray | None = None
+    G: np.ndarray | None = None
+    E: np.ndarray | None = None
+
+
 @dataclass(frozen=True)
 class UpdateMoments:
     """The part of one Gaussian update that does not depend on the measurement, for a batch of tracks.
@@ -357,10 +380,101 @@ class _GaussianFilter(FilterBase):
         k = state.k + 1 if k is None else int(k)
         dt = time_step(dt, k)
         batch = state.batch
-        z = measurement_for_step(z, batch, self._measurement_dim(), k)
+        complete = _checked_measurement(z, batch, self.measurement)  # the cheap check of one run, else the full one
+        if not complete:
+            z = measurement_for_step(z, batch, self._measurement_dim(), k)
         if self._specs is not None and len(batch) <= 1:
             return self._compiled_step(state, z, k, dt)
+        # One run on one matrix: batch (), or (1,) with a shared covariance.  A (1,) state with a covariance of
+        # its own (an IMM's mixture, a multi-target gather) keeps the general step, whose bits equal those of
+        # the same run in a larger batch.
+        if (
+            batch in _ONE_RUN
+            and type(self) in _ONE_RUN_TYPES
+            and type(self.fading) is Constant
+            and (not batch or is_shared(state.cov, 2))
+        ):
+            out = self._one_run_step(state, z, k, dt, complete)
+            if out is not None:
+                return out
         return self.numpy_step(state, z, k, dt)
+
+    def _one_run_step(
+        self, state: GaussianState, z: np.ndarray, k: int, dt: float | None, complete: bool = False
+    ) -> tuple[GaussianState, dict[str, np.ndarray]] | None:
+        """:meth:`numpy_step` for one run (batch ``()`` or ``(1,)``) and a constant fading factor, or None.
+
+        The maths of the general step on plain 2-D arrays: ``ndarray.dot``
+        instead of ``einsum``, ``matmul`` and broadcasts (each costs several
+        times the arithmetic on a 4 x 4 matrix), closed-form S⁻¹ and log det S
+        in Python floats, LAPACK's Cholesky called directly.  It agrees with
+        :meth:`numpy_step` to round-off, with the same info keys, shapes and
+        dtypes.  None where the general step must decide: some but not all
+        components of ``z`` missing, a covariance that needs a repair, a
+        model that returns batched matrices for one state; the caller then
+        runs :meth:`numpy_step`.  ``complete``: ``z`` is known to have no
+        missing component.
+        """
+        batch = state.batch
+        x, P, z1 = (state.mean[0], state.cov[0], z[0]) if batch else (state.mean, state.cov, z)
+        lam = self.fading.lam
+        pred = self._predict_one(x, P, k, dt)
+        if pred is None:
+            return None
+        P_pred = pred.propagated + pred.Q if lam == 1.0 else lam * pred.propagated + pred.Q
+        meas = self._measure_one(pred.mean, P_pred, k)
+        if meas is None:
+            return None
+        m = z1.shape[0]
+        missing = 0 if complete else int(np.isnan(z1).sum())
+        if not missing:
+            out = _one_run_update(pred.mean, P_pred, z1, meas, self.measurement, k)
+            if out is None:
+                return None
+            mean, cov, nu, S, nis, loglik = out
+            dof = m
+            gated = self.gate is not None and nis > chi2_gate_thresholds(self.gate, m)[m]
+            if gated:  # the prediction, the info describing the rejected measurement (as apply_gate)
+                mean, cov = pred.mean, _sym(P_pred)
+        elif missing == m:  # predict only: zero gain, unit variance for every missing component
+            mean, cov, gated = pred.mean, _sym(P_pred), False
+            nu, S, nis, dof, loglik = np.array([np.nan] * m), _eye(m).copy(), np.nan, 0, 0.0
+        else:
+            return None
+        P_out, cross = P_pred, pred.cross
+        if batch:
+            mean, nu, S, pred_mean = mean[None], nu[None], S[None], pred.mean[None]
+            cov = cov[None]  # a new axis has stride 0: the shared covariance of the general step
+            cov.flags.writeable = False
+            if not (self._one_run_shares_pred and is_shared(state.cov, 2)):
+                P_out, cross = P_pred[None], cross[None]
+        else:
+            pred_mean = pred.mean
+        info = {
+            "innovation": nu,
+            "S": S,
+            "nis": np.array([nis] if batch else nis),
+            "dof": _constant(dof, batch),
+            "loglik": np.array([loglik] if batch else loglik),
+            "fading": _constant(float(lam), batch),
+            "faded": _constant(lam > 1.0, batch),
+            "repaired": _constant(False, batch),
+            "gated": _constant(bool(gated), batch),
+            "pred_mean": pred_mean,
+            "pred_cov": P_out,
+            "cross_cov": cross,
+        }
+        return GaussianState(mean=mean, cov=cov, k=k, memory=state.memory), info
+
+    # The one-run hooks: _predict and _measure for x (n,), P (n, n), on 2-D arrays; None: use the general step.
+    _one_run_shares_pred: ClassVar[bool] = False
+    """Whether the general step keeps pred_cov and cross_cov unbatched, ``(n, n)``, while the state's covariance is shared (the KF)."""
+
+    def _predict_one(self, x: np.ndarray, P: np.ndarray, k: int, dt: float | None) -> _OnePrediction | None:
+        raise NotImplementedError
+
+    def _measure_one(self, x_pred: np.ndarray, P_pred: np.ndarray, k: int) -> _OneMeasured | None:
+        raise NotImplementedError
 
     def numpy_step(
         self, state: GaussianState, z: np.ndarray, k: int, dt: float | None
@@ -522,6 +636,99 @@ def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k):
     return mean, cov, info
 
 
+_ONE_RUN = ((), (1,))  # batches the one-run step serves
+
+
+def _checked_measurement(z: Any, batch: tuple[int, ...], measurement: Any) -> bool:
+    """True when ``z`` already is what :func:`measurement_for_step` returns for one run: float64, ``(*batch, m)``, within range.
+
+    The bounds are checked on Python floats (an array reduction costs more
+    than the step's arithmetic); anything else, NaN included, goes through
+    :func:`measurement_for_step`, which raises the errors.  True means no
+    component is missing.
+    """
+    if batch not in _ONE_RUN or type(z) is not np.ndarray or z.dtype != np.float64 or z.shape[:-1] != batch:
+        return False
+    m = model_dim(measurement)
+    if m is None or z.shape[-1] != m:
+        return False
+    values = z.ravel().tolist()
+    total = sum(values)
+    return total - total == 0.0 and max(map(abs, values)) <= MAX_MEASUREMENT  # the first is False for NaN or ±inf
+
+
+@lru_cache(maxsize=256, typed=True)  # typed: 0 and False are different arrays
+def _constant(value: Any, batch: tuple[int, ...]) -> np.ndarray:
+    """A read-only ``batch``-shaped array of ``value`` (``dof``, ``fading``, the flags), made once: steps share it."""
+    out = np.array([value] if batch else value)
+    out.flags.writeable = False
+    return out
+
+
+@lru_cache(maxsize=16)
+def _eye(n: int) -> np.ndarray:
+    out = np.eye(n)
+    out.flags.writeable = False
+    return out
+
+
+@lru_cache(maxsize=16)
+def _halves(n: int) -> np.ndarray:
+    out = np.full((n, n), 0.5)
+    out.flags.writeable = False
+    return out
+
+
+def _sym(A: np.ndarray) -> np.ndarray:
+    """:func:`pursuit._linalg.symmetrize` of one matrix, bit for bit.
+
+    The transpose is copied first and the half is an array: a ufunc mixing C
+    and Fortran order, or taking a Python scalar, costs several times the
+    arithmetic on a small matrix.
+    """
+    return (A + A.T.copy()) * _halves(A.shape[0])
+
+
+def _one_run_update(x_pred, P_pred, z, meas: _OneMeasured, measurement, k):
+    """:func:`_update` and :func:`_gain_and_cov` for one run with every component measured, on 2-D arrays.
+
+    Returns ``(mean, cov, ν, S, nis, loglik)`` with NIS and the
+    log-likelihood as Python floats, or None for a batched R.
+    """
+    R = np.asarray(measurement.cov(k), dtype=float)
+    if R.ndim != 2:
+        return None
+    m = R.shape[0]
+    nu = _residual(measurement, z, meas.zp)
+    S = _sym(meas.Pzz + R)
+    small = small_inv_logdet(S)
+    if small is None:  # m > 3, or a determinant the closed forms cannot trust: LAPACK decides
+        S_inv, logdet = inv_spd(S), float(logdet_spd(S))
+    else:
+        S_inv, logdet = small
+    K = meas.Pxz.dot(S_inv)
+    if meas.L is not None:  # sigma points: the Joseph form through the points' factor (see _gain_and_cov)
+        AL = meas.L - K.dot(meas.G.T)
+        C = small_cholesky(R) if meas.E is not None else None
+        if C is not None:  # the Gram matrix of _joseph_gram
+            W = np.concatenate([AL, K.dot(C), K.dot(meas.E.T)], axis=1)
+            cov = W.dot(W.T)
+        else:
+            cov = AL.dot(AL.T) + K.dot(R + meas.D).dot(K.T)
+    else:  # KF/EKF: A P⁻ Aᵀ as the Gram matrix of P⁻'s factor (see _sandwich)
+        A = _eye(P_pred.shape[0]) - K.dot(meas.H)
+        L = small_cholesky(P_pred)
+        if L is None:
+            cov = A.dot(P_pred).dot(A.T)
+        else:
+            AL = A.dot(L)
+            cov = AL.dot(AL.T)
+        cov = cov + K.dot(R).dot(K.T)
+    v, w = nu.tolist(), S_inv.ravel().tolist()
+    nis = sum([v[i] * w[i * m + j] * v[j] for i in range(m) for j in range(m)])
+    return x_pred + K.dot(nu), _sym(cov), nu, S, nis, -0.5 * (nis + logdet + m * _LOG_2PI)
+
+
 def _gain_and_cov(P_pred, meas: _Measured, R, R_eff, Pzz, Pxz, H, D):
     """S, S⁻¹, the gain K and the Joseph-form covariance (not yet symmetrised): the part of the update that ignores z."""
     S = symmetrize(Pzz + R_eff)
@@ -663,6 +870,21 @@ class ExtendedKalmanFilter(_GaussianFilter):
         PHt = P_pred @ _t(H)
         return _Measured(zp, H @ PHt, PHt, H)
 
+    def _predict_one(self, x, P, k, dt):
+        F = motion_jacobian(self.motion, x, k, dt)
+        Q = np.asarray(call_with_dt(self.motion.cov, k, dt=dt), dtype=float)
+        if F.ndim != 2 or Q.ndim != 2:
+            return None
+        PFt = P.dot(F.T)
+        return _OnePrediction(np.asarray(call_with_dt(self.motion.f, x, k, dt=dt), dtype=float), F.dot(PFt), Q, PFt)
+
+    def _measure_one(self, x_pred, P_pred, k):
+        H = measurement_jacobian(self.measurement, x_pred, k)
+        if H.ndim != 2:
+            return None
+        PHt = P_pred.dot(H.T)
+        return _OneMeasured(np.asarray(self.measurement.h(x_pred, k), dtype=float), H.dot(PHt), PHt, H)
+
 
 @dataclass(frozen=True)
 class KalmanFilter(ExtendedKalmanFilter):
@@ -700,6 +922,22 @@ class KalmanFilter(ExtendedKalmanFilter):
         H = np.asarray(self.measurement.matrix(k), dtype=float)
         PHt = P_pred @ H.T
         return _Measured(mv(H, x_pred), H @ PHt, PHt, H)
+
+    _one_run_shares_pred = True
+
+    def _predict_one(self, x, P, k, dt):
+        F = np.asarray(call_with_dt(self.motion.transition_matrix, k, dt=dt), dtype=float)
+        Q = np.asarray(call_with_dt(self.motion.cov, k, dt=dt), dtype=float)
+        if Q.ndim != 2:
+            return None
+        PFt = P.dot(F.T)
+        return _OnePrediction(F.dot(x), F.dot(PFt), Q, PFt)
+
+    def _measure_one(self, x_pred, P_pred, k):
+        H = np.asarray(self.measurement.matrix(k), dtype=float)
+        PHt = P_pred.dot(H.T)
+        return _OneMeasured(H.dot(x_pred), H.dot(PHt), PHt, H)
+
 
 
 # --------------------------------------------------------------------------
@@ -767,6 +1005,50 @@ class _SigmaPointFilter(_GaussianFilter):
         D = _t(E * wc[:, None]) @ E
         E_root = E * np.sqrt(wc)[:, None] if np.all(wc >= 0) else None
         return _Measured(zp, Pzz, Pxz, None, repaired, D, L, G, E_root)
+
+    def _points_one(self, x, P):
+        """One run's sigma points ``χ (p, n)``, weights, L and the unit points ξ, or None where P does not factor."""
+        n = x.shape[0]
+        cache = self.__dict__.get("_one_run_points")
+        if cache is None or cache[0] != n:
+            scale, wm, wc = self.sigma_weights(n)
+            unit = [scale * np.eye(n), -scale * np.eye(n)]
+            if wm.shape[0] % 2:  # an odd count carries the centre point first
+                unit.insert(0, np.zeros((1, n)))
+            root = np.sqrt(wc)[:, None] if np.all(wc >= 0) else None
+            cache = (n, wm, wc[:, None], np.vstack(unit), root)
+            object.__setattr__(self, "_one_run_points", cache)  # per filter and state size: not a field
+        _, wm, wc, xi, root = cache
+        L = small_cholesky(P)
+        if L is None:
+            return None  # the general step repairs it and flags the run
+        return x + xi.dot(L.T), wm, wc, L, xi, root
+
+    def _predict_one(self, x, P, k, dt):
+        pts = self._points_one(x, P)
+        Q = np.asarray(call_with_dt(self.motion.cov, k, dt=dt), dtype=float)
+        if pts is None or Q.ndim != 2:
+            return None
+        chi, wm, wc, _, _, _ = pts  # wc as a column (p, 1)
+        Y = np.asarray(call_with_dt(self.motion.f, chi, k, dt=dt), dtype=float)
+        mean = wm.dot(Y)
+        dY = Y - mean
+        dX = chi - x
+        return _OnePrediction(mean, _sym((dY * wc).T.dot(dY)), Q, (dX * wc).T.dot(dY))
+
+    def _measure_one(self, x_pred, P_pred, k):
+        pts = self._points_one(x_pred, P_pred)
+        if pts is None:
+            return None
+        chi, wm, wc, L, xi, root = pts
+        Z = np.asarray(self.measurement.h(chi, k), dtype=float)
+        Z0 = Z[:1]  # angles averaged about the first point, as _measure
+        zp = Z0[0] + wm.dot(_residual(self.measurement, Z, Z0))
+        dZ = _residual(self.measurement, Z, zp)
+        dX = chi - x_pred
+        G = (xi * wc).T.dot(dZ)
+        E = dZ - xi.dot(G)
+        return _OneMeasured(zp, (dZ * wc).T.dot(dZ), (dX * wc).T.dot(dZ), None, (E * wc).T.dot(E), L, G, None if root is None else E * root)
 
     def _linearize(self, pred, k):
         # Statistical linearisation about the unfaded prediction P̄ + Q:
@@ -843,3 +1125,7 @@ class CubatureKalmanFilter(_SigmaPointFilter):
     def sigma_weights(self, n):
         w = np.full(2 * n, 0.5 / n)
         return np.sqrt(n), w, w
+
+
+_ONE_RUN_TYPES = frozenset({KalmanFilter, ExtendedKalmanFilter, UnscentedKalmanFilter, CubatureKalmanFilter})
+"""The filters whose step takes the one-run path (a subclass may override a hook: it takes the general step)."""
