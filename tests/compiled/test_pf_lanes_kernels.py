@@ -78,3 +78,17 @@ def test_a_particle_count_that_is_not_a_multiple_of_the_vector_width():
     )
     np.testing.assert_allclose(b.mean, a.mean, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(b.info["loglik"], a.info["loglik"], rtol=1e-9, atol=1e-9)
+
+
+def test_weights_that_underflow_to_zero():
+    """A likelihood so narrow that most particles weigh exactly 0, the last ones included (systematic resampling's edge)."""
+    narrow = RangeSensors([[0.0, 0.0], [100.0, 0.0], [0.0, 100.0]], 0.01, (0, 2))
+    zs, prior = _work(narrow, M=3, T=4)
+    wide = pu.Gaussian(prior.mean, np.diag([25.0, 0.5, 25.0, 0.5]))
+    a, b = (
+        pu.run(pu.BootstrapParticleFilter(CV, narrow, particles=500, backend=bk), zs, wide, rng=run_streams(6, range(3), 1))
+        for bk in ("numpy", "numba")
+    )
+    assert np.all(b.info["ess"] < 50)  # the regime tested: few particles carry weight
+    np.testing.assert_allclose(b.mean, a.mean, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(b.info["loglik"], a.info["loglik"], rtol=1e-9, atol=1e-9)

@@ -874,7 +874,9 @@ def _systematic_index(c, u0, idx):
     for j in range(N):
         idx[j] = 0
     for i in range(N - 1):
-        idx[np.int64(math.ceil((c[i] / s) * N - u0))] = i + 1
+        b = np.int64(math.ceil((c[i] / s) * N - u0))
+        if b < N:  # b = N where the particles after i all weigh 0: no output takes i + 1
+            idx[b] = i + 1
     p = np.int64(0)
     for j in range(N):
         p = max(p, idx[j])
