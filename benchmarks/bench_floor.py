@@ -193,6 +193,87 @@ def kalman_split(runs: int, steps: int) -> tuple[float, float, float, float]:
     return block, unrolled, stepped, whole
 
 
+def ukf_split(runs: int, steps: int) -> dict[str, float]:
+    """Where the compiled UKF's time goes on bench_kf's work (4-state CV, range-bearing sensor), one thread.
+
+    Returns ns per filter-step (one run, one step) of: the range-bearing
+    measurement of the 9 sigma points alone (libm's ``hypot`` and ``atan2``,
+    one run at a time, as ``model_math.h_range_bearing``); the sigma step
+    kernel alone (lane-major arrays, no Python between steps); and
+    ``pursuit.run`` (the kernel, the per-step glue, the step info and the
+    divergence checks).
+    """
+    import numba
+    from bench_kf import ukf_work
+
+    from pursuit._compiled import gauss_kernels as GK
+    from pursuit._compiled.kernel_args import GaussOutputs, Prediction, SigmaPoints
+    from pursuit._compiled.particle import measurement_args
+
+    @numba.njit(error_model="numpy")
+    def h_points(X, out):  # 9 points (n, B) per run: range and bearing, as the kernel's h
+        acc = 0.0
+        for s in range(X.shape[0]):
+            for c in range(X.shape[2]):
+                dx = X[s, 0, c]
+                dy = X[s, 2, c] + 50.0
+                out[0, c] = math.hypot(dx, dy)
+                out[1, c] = math.atan2(dy, dx)
+            acc += out[0, 0]
+        return acc
+
+    numba.set_num_threads(1)
+    motion, meas, zs = ukf_work(runs, steps)
+    filt = pu.UnscentedKalmanFilter(motion, meas, backend="numba")
+    prior = pu.Gaussian(np.zeros(4), np.eye(4))
+    pu.run(filt, zs[:2], prior, keep_cov=False)  # compile
+    whole = _median_time(lambda: pu.run(filt, zs, prior, keep_cov=False), 3) / (runs * steps)
+
+    ms, hs = filt._specs  # noqa: SLF001 (measurement of the internals)
+    n, m = 4, 2
+    F, _, _ = ms.arrays(1, None)
+    Q = np.ascontiguousarray(ms.cov(1, None))
+    cscale, wm, wc = filt.sigma_weights(n)
+    sigma = SigmaPoints(float(cscale), np.ascontiguousarray(wm), np.ascontiguousarray(wc), wm.shape[0] % 2 == 1)
+    zl = np.ascontiguousarray(np.moveaxis(zs, 2, 1))
+    valid = ~np.isnan(zl)
+    outs = GaussOutputs(np.empty((n, runs)), np.empty((n, n, runs)), np.empty((n, runs)), np.empty((n, n, runs)),
+                        np.empty((n, n, runs)), np.empty((m, runs)), np.empty((m, m, runs)), np.empty(runs),
+                        np.empty(runs, dtype=np.int64), np.empty(runs), np.ones(runs, dtype=np.bool_))
+    sensor = measurement_args(hs)
+    x0 = np.zeros((n, runs))
+    P0 = np.ascontiguousarray(np.broadcast_to(np.eye(n)[..., None], (n, n, runs)))
+
+    def kernel_only():
+        x, P = x0, P0
+        for k in range(steps):
+            GK.sigma_step_serial((x, P), (zl[k], valid[k]), Prediction(F, Q, 1.0), sensor, sigma, outs)
+            x, P = outs.x.copy(), outs.P.copy()
+
+    kernel_only()
+    kernel = _median_time(kernel_only, 3) / (runs * steps)
+    pts = np.random.default_rng(0).standard_normal((wm.shape[0], n, runs)) * 30.0
+    hout = np.empty((m, runs))
+    h_points(pts, hout)
+    h = _median_time(lambda: h_points(pts, hout), 5) / runs
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    return {"h": h * 1e9, "kernel": kernel * 1e9, "run": whole * 1e9}
+
+
+def print_ukf_split(quick: bool = False) -> dict[str, float]:
+    """Print the UKF split as a markdown table; returns it."""
+    runs, steps = (200, 50) if quick else (1000, 200)
+    t = ukf_split(runs, steps)
+    print(f"**Compiled UKF, 4-state CV, range-bearing sensor (bench_kf's work), {runs} runs x {steps} steps, one thread**\n")
+    print("| measured | ns per filter-step | M filter-steps/s |")
+    print("|---|---|---|")
+    print(f"| range and bearing of the 9 sigma points alone (libm hypot, atan2) | {t['h']:.0f} | {1e3 / t['h']:.2f} |")
+    print(f"| sigma step kernel alone (lane-major arrays, no Python between steps) | {t['kernel']:.0f} | {1e3 / t['kernel']:.2f} |")
+    print(f"| `pursuit.run` (kernel, per-step glue, step info, divergence checks) | {t['run']:.0f} | {1e3 / t['run']:.2f} |")
+    print()
+    return t
+
+
 def main(quick: bool = False) -> dict:
     """Print two markdown tables; returns the numbers."""
     try:
@@ -234,10 +315,14 @@ def main(quick: bool = False) -> dict:
     print(f"| `pursuit.run(..., sequence=False)` (per-step call, step info, results copied into the track) | {stepped / 1e6:.2f} |")
     print(f"| `pursuit.run` (all steps in one compiled call, the default) | {whole / 1e6:.2f} |")
     print()
-    return {"particle_floor_ns": floor, "pf_run_stepped": pf_stepped, "pf_run": pf_whole, "kf_block_kernel": block, "kf_kernel": kernel, "kf_run_stepped": stepped, "kf_run": whole}
+    ukf = print_ukf_split(quick)
+    return {"ukf_split_ns": ukf, "particle_floor_ns": floor, "pf_run_stepped": pf_stepped, "pf_run": pf_whole, "kf_block_kernel": block, "kf_kernel": kernel, "kf_run_stepped": stepped, "kf_run": whole}
 
 
 if __name__ == "__main__":
     import sys
 
-    main(quick="--quick" in sys.argv)
+    if "--ukf" in sys.argv:  # the UKF split alone
+        print_ukf_split(quick="--quick" in sys.argv)
+    else:
+        main(quick="--quick" in sys.argv)

@@ -312,9 +312,41 @@ def main(quick: bool = False, repeat: int = 3) -> dict[str, Any]:
     return numbers
 
 
+def main_cv(N: int = 1000, repeat: int = 5, peer_runs: int = 10) -> dict[str, Any]:
+    """The 2-D CV range-anchor rows alone at one N (issue 22): ``particles``, then pursuit numba on one thread, then again ``particles``.
+
+    The peer is timed before and after pursuit, and the ratio is taken to
+    the mean of its two rates, so a change of load during the run shows as
+    the spread of the two peer figures.  The UNGM row (same M, T, N, numba,
+    one thread) gives the cost per particle-step of the 2-D path relative to
+    the 1-D one.
+    """
+    from pursuit.scenarios.wsn import WSNRange
+
+    M, T = 100, 100
+    cv = WSNRange(anchors=[[0.0, 0.0], [100.0, 0.0], [0.0, 100.0]], sigma=2.0, steps=T)
+    work = M * T * N
+    peer1 = peer_runs * T * N / bench_particles_cv(cv, peer_runs, T, N, 1)
+    numba1 = work / bench_pursuit_pf(M, T, N, repeat, "numba", 1, scenario=cv)
+    ungm1 = work / bench_pursuit_pf(M, T, N, repeat, "numba", 1)
+    peer2 = peer_runs * T * N / bench_particles_cv(cv, peer_runs, T, N, 1)
+    ref = 0.5 * (peer1 + peer2)
+    print(f"Machine: {machine()}\n")
+    print("| work: implementation | M particle-steps/s | vs particles | note |")
+    print("|---|---|---|---|")
+    print(f"| 2-D CV, 3 range anchors, N={N}: pursuit numba, 1 thread | {numba1 / 1e6:.1f} | {numba1 / ref:.1f}x | M={M} |")
+    print(f"| UNGM N={N}: pursuit numba, 1 thread | {ungm1 / 1e6:.1f} | | M={M}; the 2-D path costs {ungm1 / numba1:.1f}x more per particle-step |")
+    print(f"| 2-D CV, 3 range anchors, N={N}: particles (Chopin), before / after | {peer1 / 1e6:.2f} / {peer2 / 1e6:.2f} | 1.0x | one run at a time; {peer_runs} runs |")
+    return {"cv_numba1": numba1, "ungm_numba1": ungm1, "particles": (peer1, peer2)}
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
     ap.add_argument("--repeat", type=int, default=3, help="median of this many timings")
+    ap.add_argument("--cv", action="store_true", help="only the 2-D CV range-anchor rows at N = 1000, numba on one thread")
     cli = ap.parse_args()
-    main(quick=cli.quick, repeat=cli.repeat)
+    if cli.cv:
+        main_cv(repeat=cli.repeat)
+    else:
+        main(quick=cli.quick, repeat=cli.repeat)

@@ -40,7 +40,7 @@ from .common import (
 )
 from .kernel_args import Motion, PFOutputs
 from .model_math import h_point, h_row, propagate_point, propagate_row, ungm_h, ungm_mean
-from .specs import M_UNGM, UNGM
+from .specs import LINEAR, M_LINEAR, M_RANGE, M_UNGM, UNGM
 from .streams import fill_normal, fill_random, next_random
 
 
@@ -624,9 +624,268 @@ def _ungm_run(r, X, logw, logN, noise, draws, motion, sensor, opts, out, uniform
             a[i] -= ls
 
 
+# --------------------------------------------------------------------------
+# linear motion, range or linear sensor: the particles' components as rows
+# --------------------------------------------------------------------------
+@njit(cache=True)
+def lanes_rows(n: int, m: int) -> int:
+    """Rows of scratch (each N long) :func:`_lanes_run` needs: X, X⁻ (n each), h (m), e, c, wp and the gather index."""
+    return 2 * n + m + 4
+
+
+@njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def _cross_dev(w, x, cx, y, cy):
+    """Σ w_i (x_i − cx)(y_i − cy) over the particles of positive weight."""
+    acc = 0.0
+    for i in range(w.shape[0]):
+        acc += w[i] * (x[i] - cx) * (y[i] - cy) if w[i] > 0 else 0.0
+    return acc
+
+
+@njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def _cross_dev_all(x, cx, y, cy):
+    """Σ (x_i − cx)(y_i − cy)."""
+    acc = 0.0
+    for i in range(x.shape[0]):
+        acc += (x[i] - cx) * (y[i] - cy)
+    return acc
+
+
+@njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def _sum(x):
+    """Σ x_i (reassociated)."""
+    acc = 0.0
+    for i in range(x.shape[0]):
+        acc += x[i]
+    return acc
+
+
+@njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def _dot(w, x):
+    """Σ w_i x_i (reassociated; every weight counts)."""
+    acc = 0.0
+    for i in range(x.shape[0]):
+        acc += w[i] * x[i]
+    return acc
+
+
+@njit(cache=True, error_model="numpy")
+def _lanes_propagate(F, G, Xs, nz, Xp):
+    """Xp[a] = Σ_j F[a, j] Xs[j] + Σ_j G[a, j] ξ_j, component by component over all particles (same sums as :func:`.model_math._linear_motion`)."""
+    n, N = Xs.shape
+    q = G.shape[1]
+    for a_ in range(n):
+        row = Xp[a_]
+        for i in range(N):
+            row[i] = 0.0
+        for j in range(n):
+            f = F[a_, j]
+            xj = Xs[j]
+            for i in range(N):
+                row[i] += f * xj[i]
+        for i in range(N):
+            acc2 = 0.0
+            for j in range(q):
+                acc2 += G[a_, j] * nz[i * q + j]
+            row[i] = row[i] + acc2
+
+
+@njit(cache=True, error_model="numpy")
+def _lanes_measure(hk, A, idx, scale, Xp, Zp):
+    """Zp[a] = h_a of every particle: the ranges to the anchors (:func:`.model_math.h_range`) or a linear h, by rows."""
+    m, N = Zp.shape
+    if hk == M_RANGE:
+        d = A.shape[1]
+        for a_ in range(m):
+            row = Zp[a_]
+            for i in range(N):
+                row[i] = 0.0
+            for j in range(d):
+                xj = Xp[idx[j]]
+                c = A[a_, j]
+                for i in range(N):
+                    t = xj[i] - c
+                    row[i] += t * t
+            for i in range(N):
+                row[i] = math.sqrt(row[i]) / scale
+    else:  # M_LINEAR
+        n = A.shape[1]
+        for a_ in range(m):
+            row = Zp[a_]
+            for i in range(N):
+                row[i] = 0.0
+            for j in range(n):
+                c = A[a_, j]
+                xj = Xp[j]
+                for i in range(N):
+                    row[i] += c * xj[i]
+
+
+@njit(cache=True, error_model="numpy")
+def _lanes_run(r, X, logw, logN, noise, draws, motion, sensor, opts, out, uniform_known, ws):
+    """The whole step of run r for linear motion and a range or linear sensor, every component measured.
+
+    The arithmetic of :func:`_fast_run` element by element (propagation,
+    predicted measurements, log-likelihoods, weights and the running sum
+    that systematic resampling divides), computed a component at a time
+    over all particles (the particles' components as rows of ``ws``), so
+    the compiler vectorises every pass; the weighted sums of the moments
+    are reassociated (last-bit differences only).  ``ws`` has
+    :func:`lanes_rows` rows of N.
+    """
+    addrs, per_run = draws
+    rkind, thr = opts
+    R = sensor.R
+    N, n = X.shape[1], X.shape[2]
+    m = R.shape[0]
+    Xin = X[r]
+    lw = logw[r]
+    a = out.logw[r]
+    Xs = ws[0:n]
+    Xp = ws[n:2 * n]
+    Zp = ws[2 * n:2 * n + m]
+    e, c, wp = ws[2 * n + m], ws[2 * n + m + 1], ws[2 * n + m + 2]
+    gidx = ws[2 * n + m + 3].view(np.int64)
+    nz = noise[r]
+    if per_run:
+        fill_normal(addrs[r], nz)
+    uniform = uniform_known or _all_uniform(lw, logN)
+    invN = 1.0 / N
+    for i in range(N):
+        for j in range(n):
+            Xs[j, i] = Xin[i, j]
+    _lanes_propagate(motion.F, motion.G, Xs, nz, Xp)
+    _lanes_measure(sensor.kind, sensor.A, sensor.idx, sensor.scale, Xp, Zp)
+    const = 0.0
+    for j in range(m):
+        const += -0.5 * (math.log(R[j, j]) + LOG_2PI)
+    zvec = out.innov[r]  # holds z on entry (set by the caller), innovation on exit
+    for i in range(N):
+        a[i] = 0.0
+    for j in range(m):
+        zj = zvec[j]
+        hR = -0.5 / R[j, j]
+        row = Zp[j]
+        for i in range(N):
+            d = zj - row[i]
+            a[i] += d * d * hR
+    zhat = np.empty(m)
+    if uniform:
+        for i in range(N):
+            v = a[i]
+            a[i] = v if v == v else -np.inf  # a NaN likelihood counts as zero
+        for j in range(m):
+            zhat[j] = _sum(Zp[j]) * invN
+    else:  # predictive weights exp(offset)/N, offset = log w + log N
+        for i in range(N):
+            o = lw[i] + logN
+            v = a[i] + o
+            a[i] = v if v == v else -np.inf
+            wp[i] = exp_weight(o) * invN
+        for j in range(m):
+            zhat[j] = _dot(wp, Zp[j])
+    mx = _max(a)
+    rst = False
+    if not math.isfinite(mx):
+        # rare: infinite or all-zero likelihoods; the general recovery rule
+        offset = np.empty(N)
+        for i in range(N):
+            offset[i] = lw[i] + logN
+        mx, s, s2, rst = exp_shifted_run(a, offset, not uniform, e)
+    else:
+        for i in range(N):
+            sh = a[i] - mx
+            a[i] = sh
+            e[i] = exp_weight(sh)
+        s2 = _sum_sq(e)
+    acc = 0.0
+    for i in range(N):  # in order: systematic resampling divides the running sums by the total
+        acc += e[i]
+        c[i] = acc
+    s = acc
+    inv = 1.0 / s
+    mu = out.mean[r]
+    for j in range(n):
+        mu[j] = _weighted_sum(e, Xp[j]) * inv
+    C = out.cov[r]
+    for p in range(n):
+        for q_ in range(p, n):
+            C[p, q_] = _cross_dev(e, Xp[p], mu[p], Xp[q_], mu[q_]) * inv
+            C[q_, p] = C[p, q_]
+    Sr = out.S[r]
+    for p in range(m):
+        for q_ in range(p, m):
+            if uniform:
+                v = _cross_dev_all(Zp[p], zhat[p], Zp[q_], zhat[q_]) * invN
+            else:
+                v = _cross_dev_all_w(wp, Zp[p], zhat[p], Zp[q_], zhat[q_])
+            Sr[p, q_] = v + R[p, q_]
+            Sr[q_, p] = v + R[q_, p]
+    tmp = np.empty(m)
+    for p in range(m):
+        zvec[p] = zvec[p] - zhat[p]
+        tmp[p] = zvec[p]
+    L = np.empty((m, m))
+    out.nis[r] = chol_quad(L, tmp.copy(), tmp) if cholesky_inplace(Sr, L) else np.nan
+    out.dof[r] = m
+    ls = math.log(s)
+    out.loglik[r] = -np.inf if rst else mx + ls + (const - logN)
+    out.reset[r] = rst
+    es = s * s / s2
+    out.ess[r] = es
+    nd = thr < 0 or es < thr * N
+    out.need[r] = nd
+    dst = out.particles[r]
+    if nd and per_run and rkind == R_SYSTEMATIC:
+        _systematic_index(c, next_random(addrs[r]), gidx)
+        for i in range(N):
+            g = gidx[i]
+            for j in range(n):
+                dst[i, j] = Xp[j, g]
+            a[i] = -logN
+    elif nd and per_run:
+        nu_ = n_uniforms(rkind, N)
+        U = np.empty(nu_)
+        fill_random(addrs[r], U)
+        for i in range(N):
+            a[i] -= ls
+        _resample_run(r, rkind, np.ascontiguousarray(Xp.T), e, U, out.particles, out.logw, logN)
+    else:
+        for i in range(N):
+            for j in range(n):
+                dst[i, j] = Xp[j, i]
+            a[i] -= ls
+
+
+@njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def _cross_dev_all_w(w, x, cx, y, cy):
+    """Σ w_i (x_i − cx)(y_i − cy) (every weight counts)."""
+    acc = 0.0
+    for i in range(x.shape[0]):
+        acc += w[i] * (x[i] - cx) * (y[i] - cy)
+    return acc
+
+
+@njit(cache=True, error_model="numpy")
+def _systematic_index(c, u0, idx):
+    """The source particle of each output of systematic resampling, from the running sums ``c`` (:func:`systematic_fill_cdf`)."""
+    N = c.shape[0]
+    s = c[N - 1]
+    for j in range(N):
+        idx[j] = 0
+    for i in range(N - 1):
+        b = np.int64(math.ceil((c[i] / s) * N - u0))
+        if b < N:  # b = N where the particles after i all weigh 0: no output takes i + 1
+            idx[b] = i + 1
+    p = np.int64(0)
+    for j in range(N):
+        p = max(p, idx[j])
+        idx[j] = p
+
+
 @njit(cache=True, error_model="numpy")
 def _step_body(r, X, logw, noise, z, valid, draws, motion, sensor, opts, out, uniform_known, ws):
-    """Step of run r (see :func:`_pf_step`); ``ws`` (4, N) is scratch, ``uniform_known`` as in :func:`_ungm_run`."""
+    """Step of run r (see :func:`_pf_step`); ``ws`` (at least 4 and :func:`lanes_rows` rows, N) is scratch, ``uniform_known`` as in :func:`_ungm_run`."""
     N, n = X.shape[1], X.shape[2]
     logN = math.log(N)
     m = z.shape[1]
@@ -637,6 +896,12 @@ def _step_body(r, X, logw, noise, z, valid, draws, motion, sensor, opts, out, un
     if all_valid and motion.kind == UNGM and sensor.kind == M_UNGM:
         out.innov[r, 0] = z[r, 0]
         _ungm_run(r, X, logw, logN, noise, draws, motion, sensor, opts, out, uniform_known, ws)
+        return
+    if all_valid and motion.kind == LINEAR and (sensor.kind == M_RANGE or sensor.kind == M_LINEAR):
+        zv = out.innov[r]
+        for j in range(m):
+            zv[j] = z[r, j]
+        _lanes_run(r, X, logw, logN, noise, draws, motion, sensor, opts, out, uniform_known, ws)
         return
     if all_valid and not sensor.angle:
         zv = out.innov[r]
@@ -686,7 +951,7 @@ def _pf_step(particles, noise, obs, draws, motion, sensor, opts, out):
     z, valid = obs
     for rr in prange(X.shape[0]):
         r = np.int64(rr)  # prange counts in uint64
-        ws = np.empty((4, X.shape[1]))
+        ws = np.empty((max(4, lanes_rows(X.shape[2], z.shape[1])), X.shape[1]))
         _step_body(r, X, logw, noise, z, valid, draws, motion, sensor, opts, out, False, ws)
 
 
@@ -712,7 +977,7 @@ def _pf_sequence(prior, noise, obs, draws, motion, sensor, opts, buffers, out, k
     K = zs.shape[0]
     for rr in prange(X0.shape[0]):
         r = np.int64(rr)
-        ws = np.empty((4, X0.shape[1]))
+        ws = np.empty((max(4, lanes_rows(X0.shape[2], zs.shape[2])), X0.shape[1]))
         for k in range(K):
             c = k if keep_cov else 0
             known = k > 0 and out.need[k - 1, r]
