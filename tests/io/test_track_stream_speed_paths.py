@@ -260,3 +260,41 @@ def test_the_stream_benchmark_input_reads_without_a_bad_record(tmp_path):
             results[fmt] = track_records(read_records(f, fmt), model)
         assert not results[fmt].problems and len(results[fmt].estimates) == 300
     assert [e.mean.tolist() for e in results["csv"].estimates] == [e.mean.tolist() for e in results["jsonl"].estimates]
+
+
+# --------------------------------------------------------------------------
+# a live input: nothing complete is held back while the input waits
+# --------------------------------------------------------------------------
+class _PausingInput:
+    """Serves ``chunks`` one ``read1`` at a time (a live input that pauses between them).
+
+    At every read it records how many estimates the consumer had received by
+    then: what a reader of the output would have seen while the input waited.
+    """
+
+    def __init__(self, chunks: list[bytes], emitted: list) -> None:
+        self.chunks, self.emitted, self.seen = list(chunks), emitted, []
+
+    def read1(self, n: int) -> bytes:
+        self.seen.append(len(self.emitted))
+        return self.chunks.pop(0) if self.chunks else b""
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_a_live_stream_hands_out_every_complete_step_before_it_waits(tmp_path, backend):
+    """Two records of t = 2 arrive last: t = 1 is complete and must come out before the input waits."""
+    _backend_available(backend)
+    from pursuit.io.model import load_track_model
+    from pursuit.io.records import read_records
+
+    model_path = tmp_path / "model.toml"
+    model_path.write_text(MODEL.format(backend=backend, q=0.01) + '\n[[sensors]]\nid = "gps2"\ntype = "position"\nsigma = 5.0\n')
+    model = load_track_model(model_path)
+    emitted: list[float] = []
+    src = _PausingInput([b"time,sensor,x,y\n1,gps,1,0.5\n2,gps,2,1\n2,gps2,2,1\n", b"3,gps,3,1.5\n"], emitted)
+    lines = ChunkedLines(src)
+    records = read_records(lines, "csv", unterminated="reject", layout=model.input)
+    for event in tracker_mod.stream_records(records, model, ready=lines.ready):
+        emitted.append(event.time)
+    assert emitted == [1.0, 2.0, 3.0]
+    assert src.seen == [0, 1, 2]  # read 2 waited with t = 1 out; read 3 (the end) with t = 2 out too (t = 3 had come)

@@ -38,7 +38,7 @@ from ..filters.gaussian import check_prior_against_noise
 from ..gaussian import Gaussian
 from ..initiation import ACCELERATION_SIGMA, VELOCITY_SIGMA, multilaterate, one_point, polar_to_cartesian, two_point
 from ..registry import Param
-from .steps import Dropped, Step
+from .steps import INPUT_WAITS, Dropped, Step
 
 __all__ = ["Initiation", "INITIATION_PARAMS", "NoFix", "position_from_step", "initiate"]
 
@@ -162,6 +162,8 @@ def initiate(steps: Iterable[Any], model: Any, estimate: Any) -> Generator[Any, 
     init = model.initiation
     first = None
     for event in steps:
+        if event is INPUT_WAITS:
+            continue  # nothing is held back here: every estimate of initiation is yielded at once
         if not isinstance(event, Step):
             yield event  # bad records and dropped-record notices pass through
             continue

@@ -30,13 +30,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Iterable, Iterator, Mapping
+from typing import Any, Callable, Iterable, Iterator, Mapping
 
 import numpy as np
 
 from .records import BadRecord, Record, check_record
 
-__all__ = ["Step", "Dropped", "OUT_OF_ORDER", "assemble_steps", "sort_records"]
+__all__ = ["Step", "Dropped", "OUT_OF_ORDER", "INPUT_WAITS", "assemble_steps", "mark_waits", "sort_records"]
 
 OUT_OF_ORDER = ("sort", "drop", "error")
 
@@ -86,6 +86,38 @@ def sort_records(items: Iterable[Record | BadRecord]) -> list[Record | BadRecord
     return [*bad, *good]
 
 
+class _InputWaits:
+    """The type of :data:`INPUT_WAITS`."""
+
+    __slots__ = ()
+
+    def __repr__(self) -> str:
+        return "INPUT_WAITS"
+
+
+INPUT_WAITS = _InputWaits()
+"""Marks the place in a live input where taking the next record would wait for more input."""
+
+
+def mark_waits(items: Iterable[Any], ready: Callable[[], bool]) -> Iterator[Any]:
+    """``items`` with :data:`INPUT_WAITS` before each item whose taking may wait.
+
+    ``ready()`` says whether the next line is at hand (see
+    :meth:`pursuit.io.lines.ChunkedLines.ready`).  :func:`assemble_steps`
+    passes the marks on, so a consumer can finish what it holds (steps that
+    are complete but not yet filtered) before the input blocks.
+    """
+    it = iter(items)
+    while True:
+        if not ready():
+            yield INPUT_WAITS
+        try:
+            item = next(it)
+        except StopIteration:
+            return
+        yield item
+
+
 def assemble_steps(
     items: Iterable[Record | BadRecord],
     sensors: Mapping[str, object],
@@ -102,7 +134,7 @@ def assemble_steps(
     ----------
     items
         Records in arrival order (sort them first for the ``sort`` policy);
-        bad records are passed through.
+        bad records and :data:`INPUT_WAITS` marks are passed through.
     sensors
         The configured sensors by id (``dim``, ``valid``, ``block``).
     measurement_dim
@@ -123,7 +155,7 @@ def assemble_steps(
 
     Yields
     ------
-    Step, BadRecord or Dropped
+    Step, BadRecord, Dropped or INPUT_WAITS
         In input order; a step is yielded when a later record arrives or the
         input ends.
     """
@@ -132,6 +164,9 @@ def assemble_steps(
     pending: list[Record] = []
     pending_time: float | None = None
     for item in items:
+        if item is INPUT_WAITS:
+            yield item  # the step being assembled stays open: a record of its time may still come
+            continue
         bad = _problem(item, sensors, after, pending, pending_time, policy)
         if bad is None:
             bad = _too_far(item, pending[0].line if pending else None, pending_time if pending else after, max_gap)

@@ -32,7 +32,7 @@ from ..rng import RunStreams
 from .initiate import initiate
 from .model import TrackModel
 from .records import BadRecord, Record
-from .steps import Dropped, Step, assemble_steps, sort_records
+from .steps import INPUT_WAITS, Dropped, Step, assemble_steps, mark_waits, sort_records
 
 __all__ = ["Estimate", "Tracker", "StepRefused", "TrackResult", "track_records", "stream_records", "BLOCK_STEPS"]
 
@@ -360,10 +360,13 @@ def stream_records(
     compiled call where :meth:`Tracker.update_sequence` applies, else step by
     step; the estimates are the same either way).  ``ready`` says whether the
     input has more lines at hand without waiting (a live stream); a block ends
-    as soon as it says no, so no estimate waits for a record that has not
-    arrived.  None: the input never waits (a list, a file).
+    before any read that may wait (:func:`pursuit.io.steps.mark_waits`), so no
+    complete step waits for a record that has not arrived.  None: the input
+    never waits (a list, a file).
     """
     policy = "error" if out_of_order == "sort" else out_of_order
+    if ready is not None:
+        items = mark_waits(items, ready)
     steps = assemble_steps(
         items,
         model.sensors,
@@ -379,20 +382,17 @@ def stream_records(
             return
     tracker = Tracker(model)
     block: list[Step] = []
-    while True:
-        event = next(steps, None) if not block or ready is None or ready() else None
+    for event in steps:
         if isinstance(event, Step):
             block.append(event)
             if len(block) < BLOCK_STEPS:
                 continue
-            event = None
         if block:  # the block is full, the input would wait, or another kind of event comes next
-            stopped = yield from _filter_block(tracker, block, stop_at_bad)
-            if stopped:
+            if (yield from _filter_block(tracker, block, stop_at_bad)):
                 return
             block = []
-            if event is None:
-                continue
-        if event is None:
-            return
+        if isinstance(event, Step) or event is INPUT_WAITS:
+            continue
         yield event
+    if block:
+        yield from _filter_block(tracker, block, stop_at_bad)
