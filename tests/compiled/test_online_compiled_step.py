@@ -191,3 +191,16 @@ def test_filter_pickles_after_stepping():
     b, info = copy.step(s, np.array([61.0, 1.01]))
     assert isinstance(info, StepInfo)
     assert np.array_equal(a.mean, b.mean) and np.array_equal(a.cov, b.cov)
+
+
+def test_the_step_info_pickles_as_the_numpy_steps_dict():
+    """Info sent to another process (multiprocessing, Dask) pickles like the NumPy step's plain dict."""
+    filt, ref = _filters(pu.UnscentedKalmanFilter, RB)
+    z = np.array([60.0, 1.0])
+    _, info = filt.step(filt.init(pu.Gaussian(X0, COV0)), z)
+    _, want = ref.step(ref.init(pu.Gaussian(X0, COV0)), z)
+    info["extra"] = 1.0  # a caller's own key travels too
+    got = pickle.loads(pickle.dumps(info))
+    assert type(got) is dict and list(got) == list(want) + ["extra"]
+    for key in want:
+        np.testing.assert_allclose(np.broadcast_to(got[key], np.shape(want[key])), want[key], rtol=1e-9, atol=1e-12)

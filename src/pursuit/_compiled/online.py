@@ -53,7 +53,7 @@ __all__ = ["StepInfo", "online_lane", "INFO_KEYS"]
 
 INFO_KEYS = ("innovation", "S", "nis", "dof", "loglik", "fading", "faded", "repaired", "gated",
              "pred_mean", "pred_cov", "cross_cov")
-"""The info keys of a compiled step, in the order of the batched path."""
+"""The info keys of a compiled step, in the order of the NumPy step's info."""
 
 _F64 = np.dtype(np.float64)
 _MAX_DT_CACHE = 64  # distinct dt values whose packed model is kept
@@ -122,6 +122,10 @@ class StepInfo(MutableMapping):
 
     def __repr__(self) -> str:
         return f"StepInfo({dict(self)!r})"
+
+    def __reduce__(self):
+        # pickles as the plain dict the NumPy step returns (the lane it reads from holds compiled code)
+        return (dict, (dict(self._fill()),))
 
 
 def _vector(z: Any, m: int, batch: tuple[int, ...], k: int) -> np.ndarray:
