@@ -185,3 +185,17 @@ def test_one_run_state_is_shared_and_read_only():
     state = filt.init(pu.Gaussian(np.zeros(4), np.eye(4)), batch=(1,))
     new, _ = filt.step(state, np.array([[1.0, 2.0]]))
     assert new.cov.shape == (1, 4, 4) and new.cov.strides[0] == 0 and not new.cov.flags.writeable
+
+
+@pytest.mark.parametrize("batch", [(), (1,)], ids=["batch()", "batch(1,)"])
+@pytest.mark.parametrize("kind", ["KF", "EKF", "UKF", "CKF"])
+def test_a_kept_prediction_does_not_share_memory_with_the_info(kind, batch):
+    """Gated or unmeasured, the new mean is the prediction's value in an array of its own (as in the general step)."""
+    filt = _filter(kind, gate=0.99)
+    state = filt.init(pu.Gaussian(X0, np.diag([25.0, 1.0, 25.0, 1.0])), batch=batch)
+    z_far = filt.measurement.h(X0, 1) + np.array([500.0, 0.0])[: filt._measurement_dim()]
+    for z in (np.broadcast_to(z_far, (*batch, z_far.size)), np.full((*batch, z_far.size), np.nan)):
+        new, info = filt.step(state, z)
+        assert bool(np.all(info["gated"])) or np.isnan(z).all()
+        np.testing.assert_array_equal(new.mean, info["pred_mean"])
+        assert not np.shares_memory(new.mean, info["pred_mean"]) and not np.shares_memory(new.mean, state.mean)

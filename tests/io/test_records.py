@@ -415,3 +415,10 @@ def test_iso_like_times_and_wide_rows_never_raise(rows, wide):
             assert math.isfinite(r.time)
         else:
             assert r.field and "\n" not in r.message
+
+
+def test_a_line_break_inside_a_csv_line_is_a_malformed_record():
+    """A line handed over as a string with a line break inside (a list of lines) is refused as malformed CSV."""
+    out = list(read_records(["time,sensor,value", "1,A,1", "2,A,2\n3,A,3"], "csv"))
+    bad = [r for r in out if isinstance(r, BadRecord)]
+    assert len(bad) == 1 and bad[0].field == "record" and "malformed CSV" in bad[0].message

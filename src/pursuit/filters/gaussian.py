@@ -409,7 +409,10 @@ class _GaussianFilter(FilterBase):
         times the arithmetic on a 4 x 4 matrix), closed-form S⁻¹ and log det S
         in Python floats, LAPACK's Cholesky called directly.  It agrees with
         :meth:`numpy_step` to round-off, with the same info keys, shapes and
-        dtypes.  None where the general step must decide: some but not all
+        dtypes, except that with batch ``(1,)`` ``pred_cov`` and ``cross_cov``
+        may be ``(n, n)`` where the general step gives ``(1, n, n)`` or the
+        reverse (the general step's shape follows whether the model's matrices
+        depend on the state); either broadcasts to the batch.  None where the general step must decide: some but not all
         components of ``z`` missing, a covariance that needs a repair, a
         model that returns batched matrices for one state; the caller then
         runs :meth:`numpy_step`.  ``complete``: ``z`` is known to have no
@@ -435,9 +438,9 @@ class _GaussianFilter(FilterBase):
             dof = m
             gated = self.gate is not None and nis > chi2_gate_thresholds(self.gate, m)[m]
             if gated:  # the prediction, the info describing the rejected measurement (as apply_gate)
-                mean, cov = pred.mean, _sym(P_pred)
+                mean, cov = pred.mean.copy(), _sym(P_pred)  # a copy: the state must not share info's pred_mean
         elif missing == m:  # predict only: zero gain, unit variance for every missing component
-            mean, cov, gated = pred.mean, _sym(P_pred), False
+            mean, cov, gated = pred.mean.copy(), _sym(P_pred), False
             nu, S, nis, dof, loglik = np.array([np.nan] * m), _eye(m).copy(), np.nan, 0, 0.0
         else:
             return None

@@ -342,7 +342,7 @@ def read_csv(
 
 
 def _split_csv(text: str) -> list[str]:
-    if '"' not in text and "\r" not in text:  # no quoting and no stray newline: the csv module would split at the commas
+    if '"' not in text and "\r" not in text and "\n" not in text:  # no quoting, no stray line break: csv would split at the commas
         return text.split(",")
     try:
         rows = list(csv.reader([text], strict=True))
