@@ -1,7 +1,9 @@
-"""The one-run step of the Gaussian filters (batch ``()`` or ``(1,)``) against the general NumPy step.
+"""The one-run step of the Gaussian filters (batch ``()``) against the general NumPy step.
 
-``step`` on one run takes a lean path (plain 2-D arrays, closed forms, no
-broadcasts); ``numpy_step`` is the general step every batch takes.  From the
+``step`` on one run without a batch axis takes a lean path (plain 2-D arrays,
+closed forms, no broadcasts); ``numpy_step`` is the general step every batch
+takes, ``(1,)`` included, so that a run gives the same bits alone in a batch
+of one as inside a larger batch (tested here too).  From the
 same state and measurement both must give the same estimate and the same info
 (keys, shapes, dtypes) to 1e-12 relative, in every situation the step meets:
 angles wrapping, missing components, all-NaN steps, a gate, constant fading
@@ -137,6 +139,21 @@ def test_a_batch_of_three_equals_three_one_run_steps(kind):
             np.testing.assert_allclose(singles[i].cov, batched.cov[i], rtol=1e-9, atol=1e-9)
             for key in ("nis", "loglik", "dof", "gated"):
                 np.testing.assert_allclose(one[key], info[key][i], rtol=1e-9, atol=1e-9, equal_nan=True, err_msg=key)
+
+
+@pytest.mark.parametrize("kind", ["KF", "EKF", "UKF", "CKF"])
+def test_a_batch_of_one_equals_the_same_run_in_a_batch_of_three_bit_for_bit(kind):
+    """A Monte Carlo chunk of one run must not change a bit (results do not depend on the chunk size)."""
+    filt = _filter(kind, gate=0.99)
+    zs = np.stack([_measurements(filt, seed) for seed in range(3)], axis=1)  # (STEPS, 3, m)
+    prior = pu.Gaussian(X0 + 1.0, np.diag([20.0, 2.0, 20.0, 2.0]))
+    three, one = filt.init(prior, batch=(3,)), filt.init(prior, batch=(1,))
+    for z in zs:
+        three, info3 = filt.step(three, z)
+        one, info1 = filt.step(one, z[2:3])
+        assert np.array_equal(one.mean[0], three.mean[2]) and np.array_equal(one.cov[0], three.cov[2])
+        for key in ("innovation", "S", "nis", "loglik"):  # reductions over a batch may round differently: states are what must agree
+            np.testing.assert_allclose(np.asarray(info1[key])[0], np.asarray(info3[key])[2], rtol=1e-12, equal_nan=True, err_msg=key)
 
 
 def test_the_one_run_path_runs(monkeypatch):

@@ -385,15 +385,10 @@ class _GaussianFilter(FilterBase):
             z = measurement_for_step(z, batch, self._measurement_dim(), k)
         if self._specs is not None and len(batch) <= 1:
             return self._compiled_step(state, z, k, dt)
-        # One run on one matrix: batch (), or (1,) with a shared covariance.  A (1,) state with a covariance of
-        # its own (an IMM's mixture, a multi-target gather) keeps the general step, whose bits equal those of
-        # the same run in a larger batch.
-        if (
-            batch in _ONE_RUN
-            and type(self) in _ONE_RUN_TYPES
-            and type(self.fading) is Constant
-            and (not batch or is_shared(state.cov, 2))
-        ):
+        # One run without a batch axis.  A batch (1,), even with a shared covariance, keeps the general step:
+        # its bits must equal those of the same run in a larger batch (a Monte Carlo chunk of one run, an IMM's
+        # mixture, a multi-target gather), and the one-run maths agrees with them to round-off only.
+        if not batch and type(self) in _ONE_RUN_TYPES and type(self.fading) is Constant:
             out = self._one_run_step(state, z, k, dt, complete)
             if out is not None:
                 return out
@@ -402,24 +397,21 @@ class _GaussianFilter(FilterBase):
     def _one_run_step(
         self, state: GaussianState, z: np.ndarray, k: int, dt: float | None, complete: bool = False
     ) -> tuple[GaussianState, dict[str, np.ndarray]] | None:
-        """:meth:`numpy_step` for one run (batch ``()`` or ``(1,)``) and a constant fading factor, or None.
+        """:meth:`numpy_step` for one run without a batch axis (batch ``()``) and a constant fading factor, or None.
 
         The maths of the general step on plain 2-D arrays: ``ndarray.dot``
         instead of ``einsum``, ``matmul`` and broadcasts (each costs several
         times the arithmetic on a 4 x 4 matrix), closed-form S⁻¹ and log det S
         in Python floats, LAPACK's Cholesky called directly.  It agrees with
-        :meth:`numpy_step` to round-off, with the same info keys, shapes and
-        dtypes, except that with batch ``(1,)`` ``pred_cov`` and ``cross_cov``
-        may be ``(n, n)`` where the general step gives ``(1, n, n)`` or the
-        reverse (the general step's shape follows whether the model's matrices
-        depend on the state); either broadcasts to the batch.  None where the general step must decide: some but not all
+        :meth:`numpy_step` to round-off (not bit for bit: which is why a batch
+        ``(1,)`` takes the general step), with the same info keys, shapes and
+        dtypes.  None where the general step must decide: some but not all
         components of ``z`` missing, a covariance that needs a repair, a
         model that returns batched matrices for one state; the caller then
         runs :meth:`numpy_step`.  ``complete``: ``z`` is known to have no
         missing component.
         """
-        batch = state.batch
-        x, P, z1 = (state.mean[0], state.cov[0], z[0]) if batch else (state.mean, state.cov, z)
+        x, P, z1 = state.mean, state.cov, z
         lam = self.fading.lam
         pred = self._predict_one(x, P, k, dt)
         if pred is None:
@@ -444,35 +436,23 @@ class _GaussianFilter(FilterBase):
             nu, S, nis, dof, loglik = np.array([np.nan] * m), _eye(m).copy(), np.nan, 0, 0.0
         else:
             return None
-        P_out, cross = P_pred, pred.cross
-        if batch:
-            mean, nu, S, pred_mean = mean[None], nu[None], S[None], pred.mean[None]
-            cov = cov[None]  # a new axis has stride 0: the shared covariance of the general step
-            cov.flags.writeable = False
-            if not (self._one_run_shares_pred and is_shared(state.cov, 2)):
-                P_out, cross = P_pred[None], cross[None]
-        else:
-            pred_mean = pred.mean
         info = {
             "innovation": nu,
             "S": S,
-            "nis": np.array([nis] if batch else nis),
-            "dof": _constant(dof, batch),
-            "loglik": np.array([loglik] if batch else loglik),
-            "fading": _constant(float(lam), batch),
-            "faded": _constant(lam > 1.0, batch),
-            "repaired": _constant(False, batch),
-            "gated": _constant(bool(gated), batch),
-            "pred_mean": pred_mean,
-            "pred_cov": P_out,
-            "cross_cov": cross,
+            "nis": np.array(nis),
+            "dof": _constant(dof),
+            "loglik": np.array(loglik),
+            "fading": _constant(float(lam)),
+            "faded": _constant(lam > 1.0),
+            "repaired": _constant(False),
+            "gated": _constant(bool(gated)),
+            "pred_mean": pred.mean,
+            "pred_cov": P_pred,
+            "cross_cov": pred.cross,
         }
         return GaussianState(mean=mean, cov=cov, k=k, memory=state.memory), info
 
     # The one-run hooks: _predict and _measure for x (n,), P (n, n), on 2-D arrays; None: use the general step.
-    _one_run_shares_pred: ClassVar[bool] = False
-    """Whether the general step keeps pred_cov and cross_cov unbatched, ``(n, n)``, while the state's covariance is shared (the KF)."""
-
     def _predict_one(self, x: np.ndarray, P: np.ndarray, k: int, dt: float | None) -> _OnePrediction | None:
         raise NotImplementedError
 
@@ -639,7 +619,7 @@ def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k):
     return mean, cov, info
 
 
-_ONE_RUN = ((), (1,))  # batches the one-run step serves
+_ONE_RUN = ((), (1,))  # batches of one run: their measurement gets the cheap check
 
 
 def _checked_measurement(z: Any, batch: tuple[int, ...], measurement: Any) -> bool:
@@ -661,9 +641,9 @@ def _checked_measurement(z: Any, batch: tuple[int, ...], measurement: Any) -> bo
 
 
 @lru_cache(maxsize=256, typed=True)  # typed: 0 and False are different arrays
-def _constant(value: Any, batch: tuple[int, ...]) -> np.ndarray:
-    """A read-only ``batch``-shaped array of ``value`` (``dof``, ``fading``, the flags), made once: steps share it."""
-    out = np.array([value] if batch else value)
+def _constant(value: Any) -> np.ndarray:
+    """A read-only 0-d array of ``value`` (``dof``, ``fading``, the flags), made once: steps share it."""
+    out = np.array(value)
     out.flags.writeable = False
     return out
 
@@ -925,8 +905,6 @@ class KalmanFilter(ExtendedKalmanFilter):
         H = np.asarray(self.measurement.matrix(k), dtype=float)
         PHt = P_pred @ H.T
         return _Measured(mv(H, x_pred), H @ PHt, PHt, H)
-
-    _one_run_shares_pred = True
 
     def _predict_one(self, x, P, k, dt):
         F = np.asarray(call_with_dt(self.motion.transition_matrix, k, dt=dt), dtype=float)
