@@ -46,6 +46,7 @@ the four zero patterns, so it can be cached on disk (see
 from __future__ import annotations
 
 import math
+from typing import Callable
 
 import numpy as np
 
@@ -411,10 +412,17 @@ def _step_source(n: int, m: int, pats: tuple) -> list[str]:
                 {a: f"zv[{a}, c]" for a in range(m)},
                 {a: f"vv[{a}, c]" for a in range(m)})
 
+    _write_outputs(w, res, rows, n, m, lambda row: f"ov[{row}, c]")
+    return w.lines
+
+
+def _write_outputs(w: _Writer, res: dict, rows: dict, n: int, m: int, cell: Callable[[int], str]) -> None:
+    """The lines that store a step's results at the rows of :func:`step_rows`; ``cell(row)`` names the target."""
+
     def put(name: str, values: list) -> None:
         first, _ = rows[name]
         for t, value in enumerate(values):
-            w.line(f"ov[{first + t}, c] = {_lit(value)}")
+            w.line(f"{cell(first + t)} = {_lit(value)}")
 
     put("x", [res["xo"][i] for i in range(n)])
     put("xp", [res["xp"][i] for i in range(n)])
@@ -423,11 +431,10 @@ def _step_source(n: int, m: int, pats: tuple) -> list[str]:
     put("cross", [res["cross"][i, j] for i in range(n) for j in range(n)])
     put("innov", [res["e"][a] for a in range(m)])
     put("S", [res["S"][a, b] for a in range(m) for b in range(m)])
-    w.line(f"ov[{rows['nis'][0]}, c] = {_lit(res['q'])} if {_lit(res['dd'])} > 0 else np.nan")
-    _loglik_line(w, f"ov[{rows['loglik'][0]}, c]", res)
-    w.line(f"ov[{rows['dof'][0]}, c] = {_lit(res['dd'])}")
-    w.line(f"ov[{rows['ok'][0]}, c] = 1.0 if good else 0.0")
-    return w.lines
+    w.line(f"{cell(rows['nis'][0])} = {_lit(res['q'])} if {_lit(res['dd'])} > 0 else np.nan")
+    _loglik_line(w, cell(rows["loglik"][0]), res)
+    w.line(f"{cell(rows['dof'][0])} = {_lit(res['dd'])}")
+    w.line(f"{cell(rows['ok'][0])} = 1.0 if good else 0.0")
 
 
 def one_constants(F: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray, lam: float) -> np.ndarray:
@@ -472,22 +479,7 @@ def _one_source(n: int, m: int, pats: tuple) -> list[str]:
                 {a: f"z[{a}]" for a in range(m)},
                 {a: f"not math.isnan(z[{a}])" for a in range(m)})
 
-    def put(name: str, values: list) -> None:
-        first, _ = rows[name]
-        for t, value in enumerate(values):
-            w.line(f"out[{first + t}] = {_lit(value)}")
-
-    put("x", [res["xo"][i] for i in range(n)])
-    put("xp", [res["xp"][i] for i in range(n)])
-    put("P", [res["Po"][i, j] for i in range(n) for j in range(n)])
-    put("Pp", [res["Pp"][i, j] for i in range(n) for j in range(n)])
-    put("cross", [res["cross"][i, j] for i in range(n) for j in range(n)])
-    put("innov", [res["e"][a] for a in range(m)])
-    put("S", [res["S"][a, b] for a in range(m) for b in range(m)])
-    w.line(f"out[{rows['nis'][0]}] = {_lit(res['q'])} if {_lit(res['dd'])} > 0 else np.nan")
-    _loglik_line(w, f"out[{rows['loglik'][0]}]", res)
-    w.line(f"out[{rows['dof'][0]}] = {_lit(res['dd'])}")
-    w.line(f"out[{rows['ok'][0]}] = 1.0 if good else 0.0")
+    _write_outputs(w, res, rows, n, m, lambda row: f"out[{row}]")
     w.line("return 0")
     return w.lines
 
