@@ -133,13 +133,19 @@ def _param(name: str, pattern: str, shape: tuple[int, int], symmetric: bool = Fa
     return out
 
 
-def _hoist(w: _Writer, name: str, pattern: str, shape, symmetric=False) -> dict:
+def _hoist(w: _Writer, name: str, pattern: str, shape, symmetric=False, base: int | None = None) -> dict:
+    """Load every nonzero entry of matrix ``name`` into a local once; the entries of :func:`_param`.
+
+    Read from the argument ``name[i, j]``, or with ``base`` from the packed
+    vector ``c`` at ``base + i * cols + j`` (the ``one`` kernel).
+    """
     entries = _param(name, pattern, shape, symmetric)
     seen = set()
     for (i, j), v in entries.items():
         if isinstance(v, str) and v not in seen:
             seen.add(v)
-            w.line(f"{v} = {name}[{i}, {j}]")
+            source = f"{name}[{i}, {j}]" if base is None else f"c[{base + i * shape[1] + j}]"
+            w.line(f"{v} = {source}")
     return entries
 
 
@@ -442,17 +448,6 @@ def one_constants(F: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray, la
     return np.concatenate([np.asarray(a, dtype=float).ravel() for a in (F, Q, H, R)] + [np.array([float(lam)])])
 
 
-def _hoist_flat(w: _Writer, name: str, pattern: str, shape, base: int, symmetric=False) -> dict:
-    """:func:`_hoist` from the packed vector ``c`` (the same entries, read at ``base + i * cols + j``)."""
-    entries = _param(name, pattern, shape, symmetric)
-    seen = set()
-    for (i, j), v in entries.items():
-        if isinstance(v, str) and v not in seen:
-            seen.add(v)
-            w.line(f"{v} = c[{base + i * shape[1] + j}]")
-    return entries
-
-
 def _one_source(n: int, m: int, pats: tuple) -> list[str]:
     """``one(x (n,), P (n, n), z (m,), c, out (rows,))``: the step kernel's body for one run; returns 1 if z is unusable.
 
@@ -467,10 +462,10 @@ def _one_source(n: int, m: int, pats: tuple) -> list[str]:
     w.line(f"    if abs(z[a]) > {2.0 ** 500!r}:  # an infinity too; NaN (missing) compares False")
     w.line("        return 1")
     nn, mn = n * n, m * n
-    Fe = _hoist_flat(w, "F", pats[0], (n, n), 0)
-    Qe = _hoist_flat(w, "Q", pats[1], (n, n), nn, symmetric=True)
-    He = _hoist_flat(w, "H", pats[2], (m, n), 2 * nn)
-    Re = _hoist_flat(w, "R", pats[3], (m, m), 2 * nn + mn, symmetric=True)
+    Fe = _hoist(w, "F", pats[0], (n, n), base=0)
+    Qe = _hoist(w, "Q", pats[1], (n, n), symmetric=True, base=nn)
+    He = _hoist(w, "H", pats[2], (m, n), base=2 * nn)
+    Re = _hoist(w, "R", pats[3], (m, m), symmetric=True, base=2 * nn + mn)
     w.line(f"lam = c[{2 * nn + mn + m * m}]")
     rows = step_rows(n, m)
     res = _body(w, n, m, Fe, Qe, He, Re,
