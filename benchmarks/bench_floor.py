@@ -128,6 +128,29 @@ def particle_split(runs: int, steps: int, particles: int) -> tuple[float, float]
     return stepped, whole
 
 
+def _block_inputs(filt, zs: np.ndarray, runs: int, n: int = 4, m: int = 2) -> tuple:
+    """What a serial block kernel takes for ``filt``'s compiled models and ``zs (T, runs, m)``, lane-major.
+
+    ``(n, m, F, Q, zl, valid, outs, sensor, x0, P0)``: the motion matrices at
+    the model's ``dt``, the measurements ``(T, m, runs)`` and their mask, the
+    output buffers, the packed sensor, and a prior (zero mean, identity).
+    """
+    from pursuit._compiled.kernel_args import GaussOutputs
+    from pursuit._compiled.particle import measurement_args
+
+    ms, hs = filt._specs  # noqa: SLF001 (measurement of the internals)
+    F, _, _ = ms.arrays(1, None)
+    Q = np.ascontiguousarray(ms.cov(1, None))
+    zl = np.ascontiguousarray(np.moveaxis(zs, 2, 1))
+    valid = ~np.isnan(zl)
+    outs = GaussOutputs(np.empty((n, runs)), np.empty((n, n, runs)), np.empty((n, runs)), np.empty((n, n, runs)),
+                        np.empty((n, n, runs)), np.empty((m, runs)), np.empty((m, m, runs)), np.empty(runs),
+                        np.empty(runs, dtype=np.int64), np.empty(runs), np.ones(runs, dtype=np.bool_))
+    x0 = np.zeros((n, runs))
+    P0 = np.ascontiguousarray(np.broadcast_to(np.eye(n)[..., None], (n, n, runs)))
+    return n, m, F, Q, zl, valid, outs, measurement_args(hs), x0, P0
+
+
 def kalman_split(runs: int, steps: int) -> tuple[float, float, float, float]:
     """Filter-steps per second of the compiled KF, one thread.
 
@@ -140,8 +163,7 @@ def kalman_split(runs: int, steps: int) -> tuple[float, float, float, float]:
 
     from pursuit._compiled import gauss_kernels as GK
     from pursuit._compiled import generated, kf_codegen
-    from pursuit._compiled.kernel_args import GaussOutputs, Prediction
-    from pursuit._compiled.particle import measurement_args
+    from pursuit._compiled.kernel_args import Prediction
     from pursuit.models import ConstantVelocity, LinearGaussian
 
     numba.set_num_threads(1)
@@ -155,18 +177,8 @@ def kalman_split(runs: int, steps: int) -> tuple[float, float, float, float]:
     whole = runs * steps / _median_time(lambda: pu.run(filt, zs, prior, keep_cov=False), 3)
     stepped = runs * steps / _median_time(lambda: pu.run(filt, zs, prior, keep_cov=False, sequence=False), 3)
 
-    ms, hs = filt._specs  # noqa: SLF001 (measurement of the internals)
-    n, m = 4, 2
-    F, _, _ = ms.arrays(1, None)
-    Q = np.ascontiguousarray(ms.cov(1, None))
-    zl = np.ascontiguousarray(np.moveaxis(zs, 2, 1))  # (T, m, M) lane-major
-    valid = ~np.isnan(zl)
-    outs = GaussOutputs(np.empty((n, runs)), np.empty((n, n, runs)), np.empty((n, runs)), np.empty((n, n, runs)),
-            np.empty((n, n, runs)), np.empty((m, runs)), np.empty((m, m, runs)), np.empty(runs),
-            np.empty(runs, dtype=np.int64), np.empty(runs), np.ones(runs, dtype=np.bool_))
-    sensor = measurement_args(hs)
-    x0 = np.zeros((n, runs))
-    P0 = np.ascontiguousarray(np.broadcast_to(np.eye(n)[..., None], (n, n, runs)))
+    n, m, F, Q, zl, valid, outs, sensor, x0, P0 = _block_inputs(filt, zs, runs)
+    hs = filt._specs[1]  # noqa: SLF001 (measurement of the internals)
 
     def block_only():
         x, P = x0, P0
@@ -207,8 +219,7 @@ def ukf_split(runs: int, steps: int) -> dict[str, float]:
     from bench_kf import ukf_work
 
     from pursuit._compiled import gauss_kernels as GK
-    from pursuit._compiled.kernel_args import GaussOutputs, Prediction, SigmaPoints
-    from pursuit._compiled.particle import measurement_args
+    from pursuit._compiled.kernel_args import Prediction, SigmaPoints
 
     @numba.njit(error_model="numpy")
     def h_points(X, out):  # 9 points (n, B) per run: range and bearing, as the kernel's h
@@ -229,20 +240,9 @@ def ukf_split(runs: int, steps: int) -> dict[str, float]:
     pu.run(filt, zs[:2], prior, keep_cov=False)  # compile
     whole = _median_time(lambda: pu.run(filt, zs, prior, keep_cov=False), 3) / (runs * steps)
 
-    ms, hs = filt._specs  # noqa: SLF001 (measurement of the internals)
-    n, m = 4, 2
-    F, _, _ = ms.arrays(1, None)
-    Q = np.ascontiguousarray(ms.cov(1, None))
+    n, m, F, Q, zl, valid, outs, sensor, x0, P0 = _block_inputs(filt, zs, runs)
     cscale, wm, wc = filt.sigma_weights(n)
     sigma = SigmaPoints(float(cscale), np.ascontiguousarray(wm), np.ascontiguousarray(wc), wm.shape[0] % 2 == 1)
-    zl = np.ascontiguousarray(np.moveaxis(zs, 2, 1))
-    valid = ~np.isnan(zl)
-    outs = GaussOutputs(np.empty((n, runs)), np.empty((n, n, runs)), np.empty((n, runs)), np.empty((n, n, runs)),
-                        np.empty((n, n, runs)), np.empty((m, runs)), np.empty((m, m, runs)), np.empty(runs),
-                        np.empty(runs, dtype=np.int64), np.empty(runs), np.ones(runs, dtype=np.bool_))
-    sensor = measurement_args(hs)
-    x0 = np.zeros((n, runs))
-    P0 = np.ascontiguousarray(np.broadcast_to(np.eye(n)[..., None], (n, n, runs)))
 
     def kernel_only():
         x, P = x0, P0
