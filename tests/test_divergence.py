@@ -123,6 +123,66 @@ def test_batched_equals_one_run_at_a_time_and_the_monitor():
     np.testing.assert_array_equal(onset_step(batched), np.where(mon.onset >= 0, mon.onset + 1.0, np.nan))
 
 
+def _monitor_flags(nis, dof, mean, cov, test):
+    """The reference: :class:`DivergenceMonitor` fed one step at a time (what detect_divergence did)."""
+    mon = DivergenceMonitor(mean.shape[1:-1], test)
+    for k in range(mean.shape[0]):
+        mon.update(None if nis is None else nis[k], None if dof is None else (dof[k] if np.ndim(dof) else dof),
+                   mean[k], None if cov is None else cov[k])
+    return mon.flags()
+
+
+def test_whole_run_detection_equals_the_monitor_step_by_step():
+    """detect_divergence works on all steps at once: it must flag exactly what the monitor flags.
+
+    400 random cases: batch shapes (), (M,), (M1, M2); dof per step and run, per step, scalar or None;
+    NIS with streaks of all lengths, missing steps, infinities; non-finite estimates and covariances
+    (and finite ones so large that their sum overflows); streak lengths 1 to 7 and the default 20.
+    """
+    rng = np.random.default_rng(11)
+    flagged = 0
+    for case in range(400):
+        K = int(rng.integers(1, 80))
+        batch = tuple(int(b) for b in rng.integers(1, 6, size=rng.integers(0, 3)))
+        mean = rng.standard_normal((K, *batch, 3))
+        if rng.random() < 0.5:
+            hit = rng.random(mean.shape) < 0.02
+            mean[hit] = rng.choice([np.nan, np.inf, -np.inf, 1e308], size=hit.sum())
+        cov = None
+        if rng.random() < 0.3:
+            cov = rng.standard_normal((K, *batch, 3, 3))
+            cov[rng.random(cov.shape) < 0.005] = np.nan
+        p_bad = rng.random()
+        nis = np.where(rng.random((K, *batch)) < p_bad, BIG, rng.chisquare(2, (K, *batch)))
+        nis[rng.random(nis.shape) < 0.1] = np.nan
+        nis[rng.random(nis.shape) < 0.01] = np.inf
+        kind = case % 4
+        dof = [rng.integers(0, 3, size=(K, *batch)), 2, None, rng.integers(0, 3, size=(K,))][kind]
+        if kind == 3:  # one NIS per step, broadcast to the runs
+            nis = nis.reshape(K, -1)[:, 0]
+        if rng.random() < 0.1:
+            nis = None
+        test = DivergenceTest(streak=20 if case % 5 == 0 else int(rng.integers(1, 8)))
+        got = detect_divergence(nis, dof, mean, cov, test=test)
+        want = _monitor_flags(nis, dof, mean, cov, test)
+        assert got.shape == want.shape and got.dtype == bool
+        np.testing.assert_array_equal(got, want, err_msg=f"case {case}")
+        flagged += bool(want.any())
+    assert 100 < flagged < 380  # both outcomes occur often
+
+
+def test_float_dof_and_a_long_consistent_run_with_one_late_streak():
+    rng = np.random.default_rng(12)
+    K, M = 600, 50
+    nis = rng.chisquare(2, (K, M))
+    nis[500:500 + TEST.streak, 7] = BIG  # exactly a streak, late
+    nis[100:100 + TEST.streak - 1, 8] = BIG  # one short
+    dof = np.full((K, M), 2.0)
+    mean = np.zeros((K, M, 4))
+    got = detect_divergence(nis, dof, mean)
+    np.testing.assert_array_equal(got, _monitor_flags(nis, dof, mean, None, TEST))
+    assert got[:, 7].sum() == K - 500 and not got[:, 8].any() and got.sum() == K - 500
+
 def test_monitor_flags_at_the_step_that_completes_the_streak():
     mon = DivergenceMonitor((1,), DivergenceTest(streak=5))
     out = [bool(mon.update(v, 1, np.zeros((1, 2)))[0]) for v in [1.0, BIG, BIG, BIG, BIG, BIG, 1.0]]
@@ -159,3 +219,14 @@ def test_region_onset_is_immediate_and_sticky():
     assert not f[:, 0].any()
     np.testing.assert_array_equal(f[:, 1], np.arange(K) >= 4)
     np.testing.assert_array_equal(onset_step(f), [np.nan, 5.0])
+
+
+def test_whole_run_detection_edge_shapes():
+    assert detect_divergence(np.zeros((0, 3)), 2, np.zeros((0, 3, 4))).shape == (0, 3)
+    K = 3 * TEST.streak
+    mean = np.zeros((K, 3, 4))
+    cov = np.ones((K, 4, 4))  # one covariance per step, shared by the runs
+    cov[10:, 0, 0] = np.nan
+    got = detect_divergence(np.ones((K, 3)), 2, mean, cov)
+    np.testing.assert_array_equal(got, _monitor_flags(np.ones((K, 3)), 2, mean, cov, TEST))
+    assert got[10:].all() and not got[:10].any()

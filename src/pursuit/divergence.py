@@ -2,7 +2,9 @@
 
 A run is *diverged* when its estimate has left every reading the filter could
 defend.  Two documented tests decide it, both batched over runs (no Python
-loop over runs; the loop is over time steps):
+loop over runs; :func:`detect_divergence` has none over time steps either,
+so it costs a few passes over the run's arrays, less than the compiled
+filter that produced them):
 
 **The consistency test** (every run, no truth needed).  A step is
 *inconsistent* when
@@ -222,20 +224,112 @@ def detect_divergence(
         ``(K, *batch)`` bool, True from the first step of the first streak
         (or the first step outside the region) on.
     """
-    mean = np.asarray(mean)
+    mean = np.asarray(mean, dtype=float)
     K, batch = mean.shape[0], mean.shape[1:-1]
-    monitor = DivergenceMonitor(batch, test)
-    for i in range(K):  # over time; every run at once
-        monitor.update(
-            None if nis is None else np.asarray(nis)[i],
-            None if dof is None else (np.asarray(dof)[i] if np.ndim(dof) else dof),
-            mean[i],
-            None if cov is None else cov[i],
-        )
-    flags = monitor.flags()
+    test = test if test is not None else DivergenceTest()
+    runs = int(np.prod(batch, dtype=np.int64))
+    # every step's verdict at once (what DivergenceMonitor.update computes step by step)
+    bad = _not_finite_steps(mean.reshape(K, runs, mean.shape[-1]))
+    if cov is not None:
+        cov = _per_step(np.asarray(cov, dtype=float), K, batch, tail=2)
+        bad |= _not_finite_steps(cov.reshape(K, runs, -1))
+    measured = np.zeros((K, runs), dtype=bool)
+    if nis is not None:
+        nis = _per_step(np.asarray(nis, dtype=float), K, batch)
+        dof = np.asarray(1.0 if dof is None else dof)
+        with np.errstate(invalid="ignore"):
+            if dof.ndim == 0:  # one threshold for every step
+                measured = ~np.isnan(nis) if dof > 0 else measured
+                limit = test.thresholds(np.maximum(dof, 1)[None])[0]
+            else:
+                dof = _per_step(dof, K, batch)
+                measured = (dof > 0) & ~np.isnan(nis)
+                limit = _limits(test, dof, measured)
+            bad |= measured & ~(nis <= limit)  # +inf exceeds
+    onset = np.full(runs, -1, dtype=np.int64)
+    if bad.any():
+        scan = _may_streak(measured & ~bad, test.streak)
+        if scan.size:
+            onset[scan] = _streak_onsets(bad[:, scan], measured[:, scan] & ~bad[:, scan], test.streak)
+    flags = _sticky(onset.reshape(batch), K) if (onset >= 0).any() else np.zeros((K, *batch), dtype=bool)
     if outside is not None:
         flags = flags | np.logical_or.accumulate(np.asarray(outside, dtype=bool), axis=0)
     return flags
+
+
+def _per_step(values: np.ndarray, K: int, batch: tuple[int, ...], tail: int = 0) -> np.ndarray:
+    """``(K, runs, *last tail axes)``: a scalar, or a ``(K, ...)`` array whose step ``i`` broadcasts to ``batch`` (as ``update`` takes it)."""
+    last = values.shape[values.ndim - tail:] if tail else ()
+    if values.ndim:
+        values = values.reshape(K, *(1,) * (len(batch) + tail - values.ndim + 1), *values.shape[1:])
+    runs = int(np.prod(batch, dtype=np.int64))
+    return np.broadcast_to(values, (K, *batch, *last)).reshape(K, runs, *last)
+
+
+def _limits(test: DivergenceTest, dof: np.ndarray, measured: np.ndarray) -> np.ndarray:
+    """The NIS threshold of every step: integer ``dof`` through the quantile table, else :meth:`DivergenceTest.thresholds`."""
+    if dof.dtype.kind in "iu":
+        top = max(int(dof.max(initial=1)), 1)
+        if top <= 64:  # the table's entry d is the quantile at d (entry 0, unused, where nothing was measured)
+            return _table(test.tail, top)[np.clip(dof, 0, top)]
+    return test.thresholds(np.where(measured, dof, 1.0))
+
+
+def _not_finite_steps(values: np.ndarray) -> np.ndarray:
+    """``(K, runs)`` bool from ``(K, runs, w)`` floats: some entry of the row is not finite.
+
+    A row with a NaN or an infinity sums to a non-finite value, so a finite
+    sum clears a row in one product; the rare rows whose sum is not finite
+    (an overflow of large finite entries among them) are checked entry by entry.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        suspect = ~np.isfinite(values @ np.ones(values.shape[-1]))
+    if suspect.any():
+        rows = np.nonzero(suspect)
+        suspect[rows] = ~np.all(np.isfinite(values[rows]), axis=-1)
+    return suspect
+
+
+def _may_streak(good: np.ndarray, streak: int) -> np.ndarray:
+    """Indices of the runs (columns of ``(K, runs)`` bool) that may hold a streak: a necessary test.
+
+    A streak of ``streak`` steps has no consistent measured step inside, and
+    any ``streak`` consecutive steps contain a whole aligned block of
+    ``b = (streak + 1) // 2`` steps; so a run with a good step in every such
+    block cannot be flagged.  A consistent filter has them nearly everywhere,
+    and the scan of :func:`_streak_onsets` is left with few runs, if any.
+    """
+    b = (streak + 1) // 2
+    blocks = good.shape[0] // b
+    if blocks == 0:
+        return np.zeros(0, dtype=np.int64)
+    covered = good[: blocks * b].reshape(blocks, b, good.shape[1]).any(axis=1)
+    return np.flatnonzero(~covered.all(axis=0))
+
+
+def _streak_onsets(bad: np.ndarray, good: np.ndarray, streak: int) -> np.ndarray:
+    """Onset step of each column's first streak of ``streak`` bad steps (-1: none); ``(K, c)`` bool in.
+
+    The rules of :meth:`DivergenceMonitor.update`, over all steps at once: a
+    bad step extends the streak, a good one ends it, any other step leaves it
+    as it is.  So at step k the streak holds the bad steps after the last good
+    one (a difference of running counts), it first reaches ``streak`` on a bad
+    step, and it began at the first bad step after that last good one.
+    """
+    K, cols = bad.shape
+    steps = np.arange(K).reshape(K, 1)
+    last_good = np.maximum.accumulate(np.where(good, steps, -1), axis=0)
+    count = np.cumsum(bad, axis=0, dtype=np.int64)
+    col = np.arange(cols)
+    before = np.where(last_good >= 0, count[np.maximum(last_good, 0), col], 0)
+    reached = (count - before) >= streak
+    onset = np.full(cols, -1, dtype=np.int64)
+    hit = np.flatnonzero(reached.any(axis=0))
+    if hit.size:
+        first = reached[:, hit].argmax(axis=0)
+        next_bad = np.minimum.accumulate(np.where(bad[:, hit], steps, K)[::-1], axis=0)[::-1]  # first bad step >= k
+        onset[hit] = next_bad[last_good[first, hit] + 1, np.arange(hit.size)]
+    return onset
 
 
 def possible_region(
