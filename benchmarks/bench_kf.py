@@ -1,4 +1,4 @@
-"""Kalman filters: pursuit (NumPy and numba) against FilterPy, simdkalman and Stone Soup on identical work.
+"""Kalman filters: pursuit (NumPy and numba) against FilterPy, simdkalman, JAX and Stone Soup on identical work.
 
 Work (the same model, sizes and measurements for every implementation):
 
@@ -10,13 +10,18 @@ Work (the same model, sizes and measurements for every implementation):
   (σ = 1 m, 0.02 rad), scaled sigma points α = 1, β = 2, κ = 0, M = 1000
   runs x T = 200 steps.
 
-pursuit and simdkalman filter all runs at once.  FilterPy and Stone Soup
+pursuit, simdkalman and JAX filter all runs at once (JAX: ``jax.vmap`` over
+runs of a ``lax.scan`` filter, written for this benchmark in ``_jax_kf.py``;
+XLA's compile is left out of its time as numba's is out of pursuit's; its
+means are checked against pursuit's to 1e-9).  FilterPy and Stone Soup
 have no batch mode: they filter one run after another, and their rate is
 measured on fewer runs (their cost per step does not depend on the number of
 runs); the table says how many.  ``numba 1 thread`` / ``2 threads`` use
 ``numba.set_num_threads``.  Every other row is one core: NumPy's BLAS and
 OpenMP get one thread (``OMP_NUM_THREADS``, ``OPENBLAS_NUM_THREADS``,
-``MKL_NUM_THREADS`` = 1, set before NumPy is imported, ``_one_core.py``).
+``MKL_NUM_THREADS`` = 1, set before NumPy is imported, ``_one_core.py``);
+JAX's XLA gets one thread (``XLA_FLAGS``, ``_jax_kf.XLA_ONE_CORE``) and
+its row says the CPU time it used per wall second.
 
 Run::
 
@@ -76,7 +81,7 @@ def _threads(n: int | None):
     if n is not None:
         import numba
 
-        numba.set_num_threads(n)
+        numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))  # taskset -c 1: numba has one thread
 
 
 def pursuit_rate(kind: str, runs: int, steps: int, backend: str = "numpy", shared: bool = True, threads: int | None = None) -> float:
@@ -214,6 +219,35 @@ def stonesoup_rate(kind: str, runs: int, steps: int) -> float | None:
     return runs * steps / _time(go, 1)
 
 
+def jax_rows(rows, runs: int, steps: int) -> None:
+    """The JAX rows of the KF table (``_jax_kf``: ``jax.vmap`` over runs of a ``lax.scan`` filter, one core).
+
+    Each variant's means are checked against pursuit's (NumPy backend) on
+    the same work: a difference beyond 1e-9 relative raises.  Float32 is
+    measured for the record; the comparison is float64, pursuit's precision.
+    """
+    import _jax_kf
+
+    if _jax_kf.configure() is None:
+        _row(rows, "JAX vmap(lax.scan)", runs, steps, None)
+        return
+    motion, meas, zs = kf_work(runs, steps)
+    F, Q, H, R = (np.array(a) for a in (motion.transition_matrix(), motion.cov(), meas.matrix(), meas.cov()))
+    ref = pu.run(pu.KalmanFilter(motion, meas, backend="numpy"), zs, pu.Gaussian(np.zeros(4), np.eye(4)),
+                 keep_cov=False, divergence=None).mean
+    variants = [("solve", True, False, "jnp.linalg.solve"), ("2x2", True, False, "closed-form 2x2 inverse"),
+                ("2x2", True, True, "2x2 inverse; also innovations, S, NIS (pursuit's outputs)"),
+                ("2x2", False, False, "2x2 inverse; float32, not pursuit's precision")]
+    for inverse, x64, full, what in variants:
+        rate, cpu, means = _jax_kf.jax_rate(F, Q, H, R, zs, np.zeros(4), np.eye(4), REPEATS,
+                                            inverse=inverse, x64=x64, full=full)
+        err = float(np.max(np.abs(means - ref) / np.maximum(1.0, np.abs(ref))))
+        if x64 and not err <= 1e-9:
+            raise AssertionError(f"JAX ({what}) differs from pursuit by {err:.2e} (relative), beyond 1e-9")
+        _row(rows, f"JAX vmap(lax.scan), {'float64' if x64 else 'float32'}", runs, steps, rate,
+             f"{what}; XLA compile excluded; CPU/wall {cpu:.2f}; max rel. diff. from pursuit {err:.0e}")
+
+
 def _row(rows, label, runs, steps, rate, note=""):
     rows.append({"implementation": label, "runs": runs, "steps": steps, "rate": rate, "note": note})
 
@@ -230,6 +264,14 @@ def _table(title, rows, ref_label):
         ratio = f"{r['rate'] / ref:.2f}x" if ref else "n/a"
         print(f"| {r['implementation']} | {r['runs']} x {r['steps']} | {r['rate'] / 1e6:.3f} | {ratio} | {r['note']} |")
     print()
+
+
+def _jax_ratio(rows) -> None:
+    """Print pursuit's compiled KF (one thread) over the fastest float64 JAX row of the same run."""
+    ours = next((r["rate"] for r in rows if r["implementation"] == "pursuit KF numba, 1 thread"), None)
+    peers = [r["rate"] for r in rows if r["implementation"] == "JAX vmap(lax.scan), float64" and r["rate"]]
+    if ours and peers:
+        print(f"pursuit KF numba (1 thread) / fastest float64 JAX row: {ours / max(peers):.2f}x per core\n")
 
 
 def main(quick: bool = False) -> dict[str, list[dict]]:
@@ -249,12 +291,14 @@ def main(quick: bool = False) -> dict[str, list[dict]]:
         for th in (1, 2):
             _row(kf, f"pursuit KF numba, {th} thread{'s' if th > 1 else ''}", runs, steps,
                  pursuit_rate("kf", runs, steps, "numba", threads=th), "per-run P, runs across SIMD lanes")
+    jax_rows(kf, runs, steps)
     _row(kf, "simdkalman", runs, steps, simdkalman_rate(runs, steps), "batched over runs")
     _row(kf, "FilterPy KalmanFilter", few, steps, filterpy_rate("kf", few, steps), f"one run at a time; {few} runs")
     ss_runs = 1 if quick else 2
     _row(kf, "Stone Soup KalmanPredictor/Updater", ss_runs, steps if not quick else 50,
          stonesoup_rate("kf", ss_runs, steps if not quick else 50), f"one run at a time; {ss_runs} runs")
     _table("KF, 4-state CV, position measured (M = %d, T = %d)" % (runs, steps), kf, "FilterPy KalmanFilter")
+    _jax_ratio(kf)
 
     u_runs, u_steps = (200, 50) if quick else (1000, 200)
     ukf: list[dict] = []

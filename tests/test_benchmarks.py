@@ -20,6 +20,7 @@ def test_benchmark_runner_quick_mode():
     assert proc.returncode == 0, proc.stderr
     assert "pursuit KF numpy (shared P)" in proc.stdout
     assert "pursuit UKF numpy" in proc.stdout
+    assert "JAX vmap(lax.scan)" in proc.stdout  # measured where JAX is installed, else "not installed"
     assert "Rows other than numba's: one core" in proc.stdout
 
 
