@@ -171,17 +171,17 @@ def test_whole_run_detection_equals_the_monitor_step_by_step():
     assert 100 < flagged < 380  # both outcomes occur often
 
 
-def test_float_dof_and_a_long_consistent_run_with_one_late_streak():
+def test_float_uniform_and_mixed_dof_and_a_long_consistent_run_with_one_late_streak():
     rng = np.random.default_rng(12)
     K, M = 600, 50
     nis = rng.chisquare(2, (K, M))
     nis[500:500 + TEST.streak, 7] = BIG  # exactly a streak, late
     nis[100:100 + TEST.streak - 1, 8] = BIG  # one short
-    dof = np.full((K, M), 2.0)
     mean = np.zeros((K, M, 4))
-    got = detect_divergence(nis, dof, mean)
-    np.testing.assert_array_equal(got, _monitor_flags(nis, dof, mean, None, TEST))
-    assert got[:, 7].sum() == K - 500 and not got[:, 8].any() and got.sum() == K - 500
+    for dof in (np.full((K, M), 2.0), np.full((K, M), 2), np.where(rng.random((K, M)) < 0.5, 2, 1)):
+        got = detect_divergence(nis, dof, mean)
+        np.testing.assert_array_equal(got, _monitor_flags(nis, dof, mean, None, TEST))
+        assert got[:, 7].sum() == K - 500 and not got[:, 8].any() and got.sum() == K - 500
 
 def test_monitor_flags_at_the_step_that_completes_the_streak():
     mon = DivergenceMonitor((1,), DivergenceTest(streak=5))

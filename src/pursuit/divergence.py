@@ -268,8 +268,10 @@ def _per_step(values: np.ndarray, K: int, batch: tuple[int, ...], tail: int = 0)
 
 def _limits(test: DivergenceTest, dof: np.ndarray, measured: np.ndarray) -> np.ndarray:
     """The NIS threshold of every step: integer ``dof`` through the quantile table, else :meth:`DivergenceTest.thresholds`."""
-    if dof.dtype.kind in "iu":
-        top = max(int(dof.max(initial=1)), 1)
+    if dof.dtype.kind in "iu" and dof.size:
+        top, low = max(int(dof.max()), 1), max(int(dof.min()), 1)
+        if top == low:  # every step measured as much (a filter with no missing components): one threshold
+            return test.thresholds(np.array([top]))[0]
         if top <= 64:  # the table's entry d is the quantile at d (entry 0, unused, where nothing was measured)
             return _table(test.tail, top)[np.clip(dof, 0, top)]
     return test.thresholds(np.where(measured, dof, 1.0))
