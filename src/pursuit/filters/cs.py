@@ -394,7 +394,7 @@ class _AxisFilter(FilterBase):
         """
         if not _checked_measurement(z, (), self.measurement):
             z = measurement_for_step(z, (), self.axes, k)
-        r = self._check_R(np.asarray(self.measurement.cov(k), dtype=float))
+        r = _axis_variances(np.asarray(self.measurement.cov(k), dtype=float))
         idx = self._idx
         x, P = state.mean[idx], state.cov[idx[:, :, None], idx[:, None, :]]
         measured = ~np.isnan(z)
@@ -426,17 +426,19 @@ class _AxisFilter(FilterBase):
         mean, cov = self._join(x_upd, P_upd)
         pred_mean, pred_cov = self._join(x_pred, P_pred)
         A = self.axes
-        lam = np.broadcast_to(pred.lam, (A,))
+        lam = _per_axis(pred.lam, A)
+        S_mat = np.zeros((A, A))
+        S_mat.flat[:: A + 1] = S
         info = {
             "innovation": np.where(measured, nu_full, np.nan),
-            "S": np.diag(S),
+            "S": S_mat,
             "nis": np.asarray(nis),
             "dof": np.asarray(dof),
             "loglik": np.asarray(loglik),
             "fading": lam.max(),
             "axis_fading": lam,
-            "alpha": np.broadcast_to(pred.alpha, (A,)),
-            "sigma_a2": np.broadcast_to(pred.sigma2, (A,)),
+            "alpha": _per_axis(pred.alpha, A),
+            "sigma_a2": _per_axis(pred.sigma2, A),
             "gated": gated,
             "repaired": np.array(False),
             **pred.info,
@@ -457,6 +459,25 @@ class _AxisFilter(FilterBase):
     def _learn(self, memory, x_prev, x_pred, x_upd, measured, T) -> dict[str, np.ndarray]:
         """Memory for the next step; ``measured`` (*b, A) is False where the axis had no (accepted) measurement."""
         return memory
+
+
+def _per_axis(v: Any, A: int) -> np.ndarray:
+    """``np.broadcast_to(v, (A,))`` of one run without the broadcast machinery for an ``(A,)`` array."""
+    return v if type(v) is np.ndarray and v.shape == (A,) else np.full(A, v)
+
+
+def _axis_variances(R: np.ndarray) -> np.ndarray:
+    """:meth:`_AxisFilter._check_R` of one ``(A, A)`` matrix, remembered by its bytes (R is usually one constant matrix)."""
+    if R.ndim != 2:
+        return _AxisFilter._check_R(R)
+    return _axis_variances_of(R.tobytes(), R.shape[0])
+
+
+@lru_cache(maxsize=64)
+def _axis_variances_of(data: bytes, A: int) -> np.ndarray:
+    r = _AxisFilter._check_R(np.frombuffer(data).reshape(A, A)).copy()
+    r.setflags(write=False)
+    return r
 
 
 @dataclass(frozen=True)
@@ -720,8 +741,13 @@ class AdaptiveCSFilter(_AxisFilter):
         else:
             alpha = np.full(ratio.shape, self.alpha0)
 
-        F, U, q = matrices(alpha, T)
-        x_pred, P_pred, _, _ = _propagate(F, U, q, x, P, a_bar, sigma2, alpha, lam)
+        if matrices is _matrices_one_run and not detect.any():
+            # Nothing adapted (λ = 1, α = α0): the nominal prediction is the prediction, bit for bit.  Only
+            # in the step of one run: a batch's F is a broadcast view, whose products may round otherwise.
+            F, x_pred, P_pred = F0, x0, P0
+        else:
+            F, U, q = matrices(alpha, T)
+            x_pred, P_pred, _, _ = _propagate(F, U, q, x, P, a_bar, sigma2, alpha, lam)
         memory = {**memory, "V_step": V}
         info = {"maneuver": detect, "maneuver_stat": D}
         return _AxisPrediction(x_pred, P_pred, F, lam, alpha, sigma2, memory, info)

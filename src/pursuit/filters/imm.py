@@ -56,11 +56,14 @@ from .._validation import in_range, time_step
 from ..gaussian import Gaussian
 from ..rng import RNGLike
 from .base import FilterBase, as_gaussian, prior_batch
+from .cs import AxisState
 from .gating import gate_exceeded
+from .gaussian import GaussianState
 
 __all__ = ["StateMap", "IMMState", "InteractingMultipleModel", "kinematic_map"]
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
+_PLAIN_STATES = (GaussianState, AxisState)
 
 
 @dataclass(frozen=True)
@@ -396,10 +399,14 @@ class InteractingMultipleModel(FilterBase):
         d = X[:, None, :] - x0[None, :, :]  # (i, j, n)
         spread = np.matmul((d * w[:, :, None]).transpose(1, 2, 0), d.transpose(1, 0, 2))  # (j, n, n)
         P0 = w.T.dot(P.reshape(r, n * n)).reshape(r, n, n) + spread
+        P0 = symmetrize(P0)
         mixed = []
-        for j in range(r):
-            mj, cj = self._to_mode(j, x0[j], symmetrize(P0[j]))
-            mixed.append(replace(state.modes[j], mean=mj, cov=cj))
+        for j, s in enumerate(state.modes):
+            mj, cj = self._to_mode(j, x0[j], P0[j])
+            if type(s) in _PLAIN_STATES:  # their fields are mean, cov, k, memory: dataclasses.replace costs more
+                mixed.append(type(s)(mj, cj, s.k, s.memory))
+            else:
+                mixed.append(replace(s, mean=mj, cov=cj))
         new_states, infos = self._step_modes(mixed, z, k, dt)
         mode_ll = np.array([float(i["loglik"]) for i in infos])
         mode_nis = np.array([float(i["nis"]) for i in infos])
