@@ -42,6 +42,13 @@ in one step).
 The CS prediction ``F x + U ā`` with ā = â(k|k) is exactly the
 constant-acceleration extrapolation, while the covariance is propagated with
 the Singer F: ``P⁻ = λ F P Fᵀ + Q``.  ``cross_cov`` is ``P Fᵀ``.
+
+**One run without a batch axis** (batch ``()``, a target stepped from
+Python) takes :meth:`_AxisFilter._one_run_step`: the same hooks on ``(A, 3)``
+stacks, the scalar update of each axis written out, and F, U, q for α that
+differ between axes from :func:`_matrices_one_run`.  It agrees with the
+general step to round-off; every batch, ``(1,)`` included, takes the general
+step, so that a run has the same bits alone as inside a larger batch.
 """
 
 from __future__ import annotations

@@ -42,6 +42,12 @@ predicts from its mixed prior and μ = c̄, while ``innovation``, ``S``,
 ``loglik_mixture`` describe the rejected measurement.  (A step where some
 run is rejected runs the modes a second time, with the rejected runs'
 measurements set missing.)  Mode filters may carry gates of their own.
+
+One run without a batch axis (batch ``()``) takes
+:meth:`InteractingMultipleModel._one_run_step`: the same cycle on the modes
+stacked as ``(r, n)`` and ``(r, n, n)`` arrays, without einsum, each mode
+taking its own one-run step; equal to the general step to round-off.  A
+batch ``(1,)`` takes the general step (a run's bits do not depend on its batch).
 """
 
 from __future__ import annotations
