@@ -42,21 +42,34 @@ in one step).
 The CS prediction ``F x + U ā`` with ā = â(k|k) is exactly the
 constant-acceleration extrapolation, while the covariance is propagated with
 the Singer F: ``P⁻ = λ F P Fᵀ + Q``.  ``cross_cov`` is ``P Fᵀ``.
+
+**One run without a batch axis** (batch ``()``, a target stepped from
+Python) takes :meth:`_AxisFilter._one_run_step`: the same hooks on ``(A, 3)``
+stacks, the scalar update of each axis written out, and F, U, q for α that
+differ between axes from :func:`_matrices_one_run`.  It agrees with the
+general step to round-off; every batch, ``(1,)`` included, takes the general
+step, so that a run has the same bits alone as inside a larger batch.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import lru_cache
+from math import factorial
 from typing import Any
 
 import numpy as np
 
 from .._chi2 import chi2_isf
+from .._linalg import symmetrize
 from .._validation import in_range, measurement_for_step, nonnegative, positive, time_step
 from ..gaussian import Gaussian
 from ..models.maneuver import (
+    _PHI_TERMS,
+    _Q_SERIES_MAX,
+    _Q_TERMS,
     CS_VARIANCE_FACTOR,
+    _q_series_coefficients,
     cs_variance,
     exp_correlated_input,
     exp_correlated_noise,
@@ -65,7 +78,7 @@ from ..models.maneuver import (
 from ..rng import RNGLike
 from .base import FilterBase, as_gaussian, prior_batch
 from .gating import gate_exceeded
-from .gaussian import linear_update
+from .gaussian import _checked_measurement, _sandwich, linear_update
 
 __all__ = [
     "AxisState",
@@ -77,6 +90,7 @@ __all__ = [
 
 _H_AXIS = np.array([[1.0, 0.0, 0.0]])
 _H_AXIS.setflags(write=False)
+_LOG_2PI = float(np.log(2.0 * np.pi))
 
 
 def check_adaptation_params(f: Any) -> None:
@@ -164,8 +178,70 @@ def _matrices_for(alpha: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray,
     return exp_correlated_transition(3, alpha, dt), exp_correlated_input(3, alpha, dt), exp_correlated_noise(3, alpha, dt)
 
 
+@lru_cache(maxsize=1)
+def _series_tables() -> tuple[np.ndarray, np.ndarray]:
+    """Coefficients of φ_p(−x), p = 0..3, and of q / T^E as polynomials in x, lowest power first.
+
+    ``(_PHI_TERMS, 4)`` with entries ``(−1)^m / (m + p)!`` and ``(_Q_TERMS, 9)``
+    (the series of :mod:`pursuit.models.maneuver`, flattened).
+    """
+    C = np.array([[(-1.0) ** m / factorial(m + p) for p in range(4)] for m in range(_PHI_TERMS)])
+    coef, _ = _q_series_coefficients(3)
+    Cq = np.ascontiguousarray(coef[::-1].reshape(_Q_TERMS, 9))
+    for a in (C, Cq):
+        a.setflags(write=False)
+    return C, Cq
+
+
+@lru_cache(maxsize=64)
+def _period_tables(dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """What F, U and q take from T alone: the integrator chain, ``T^p_i`` (p = 2, 1, 0), ``T^E`` and the powers 0..39."""
+    _, E = _q_series_coefficients(3)
+    chain = np.array([[1.0, dt, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]])
+    out = (chain, dt ** np.array([2.0, 1.0, 0.0]), (dt**E).reshape(9), np.arange(_PHI_TERMS, dtype=float))
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
+def _matrices_one_run(alpha: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_matrices_for` of the axes of one run, ``alpha`` ``(A,)``, without a Python loop over series terms.
+
+    Equal α: the cached matrices, shared.  Different α with every αT ≤ 1
+    (the series range of q; APCS's detections and MS's estimates with the
+    default caps): the series of :mod:`pursuit.models.maneuver` evaluated as
+    one product of the powers of αT with the coefficient tables, instead of
+    a Horner loop of NumPy calls per term; round-off apart the same numbers
+    (a few ulps: the series alternate with fast-falling terms).  Larger αT:
+    :func:`_matrices_for`.
+    """
+    a = alpha.tolist()
+    if a.count(a[0]) == len(a):
+        return _matrices(float(a[0]), dt)
+    x = alpha * dt
+    if max(a) * dt > _Q_SERIES_MAX:
+        return _matrices_for(alpha, dt)
+    C, Cq = _series_tables()
+    chain, Tp, TE, m = _period_tables(dt)
+    pw = np.power(x[:, None], m)  # (A, 40): x^m
+    phi = pw.dot(C)  # φ_p(−x), (A, 4)
+    F = np.empty((x.shape[0], 3, 3))
+    F[:] = chain
+    F[:, :, 2] = phi[:, 2::-1] * Tp  # T^p_i φ_p_i
+    U = phi[:, 3:0:-1] * Tp * x[:, None]  # T^p_i x φ_(p_i + 1)
+    q = (pw[:, :_Q_TERMS].dot(Cq) * TE).reshape(-1, 3, 3)
+    return F, U, 0.5 * (q + _t(q))
+
+
 def _t(A: np.ndarray) -> np.ndarray:
     return np.swapaxes(A, -1, -2)
+
+
+@lru_cache(maxsize=1)
+def _eye3() -> np.ndarray:
+    out = np.eye(3)
+    out.setflags(write=False)
+    return out
 
 
 @dataclass(frozen=True)
@@ -265,6 +341,17 @@ class _AxisFilter(FilterBase):
         k = state.k + 1 if k is None else int(k)
         dt = time_step(dt, k)
         T = float(self.dt if dt is None else dt)
+        if not state.batch:
+            # One run without a batch axis.  A batch (1,) keeps the general step: its bits must equal
+            # those of the same run in a larger batch (a Monte Carlo chunk of one run, an IMM's mixture),
+            # and the one-run maths agrees with them to round-off only.
+            return self._one_run_step(state, z, k, T)
+        return self._general_step(state, z, k, T)
+
+    def _general_step(
+        self, state: AxisState, z: np.ndarray, k: int, T: float
+    ) -> tuple[AxisState, dict[str, np.ndarray]]:
+        """:meth:`step` for any batch: the axes are a batch axis of :func:`linear_update`."""
         batch = state.batch
         z = measurement_for_step(z, batch, self.axes, k)
         r = self._check_R(np.asarray(self.measurement.cov(k), dtype=float))
@@ -298,16 +385,106 @@ class _AxisFilter(FilterBase):
         info["cross_cov"] = self._join(x, P @ _t(pred.F))[1]
         return AxisState(mean, cov, k, memory), info
 
+    def _one_run_step(
+        self, state: AxisState, z: np.ndarray, k: int, T: float
+    ) -> tuple[AxisState, dict[str, np.ndarray]]:
+        """:meth:`_general_step` for one run without a batch axis: the same maths on ``(A, 3)`` and ``(A, 3, 3)`` stacks.
+
+        The prediction and the adaptation are the subclass's own hooks
+        (with :func:`_matrices_one_run` for α that differ between axes); the
+        update of each axis's scalar position measurement is written out
+        (S = P⁻₀₀ + r, K = P⁻[:, 0] / S, the Joseph form through
+        :func:`~pursuit.filters.gaussian._sandwich` as in
+        :func:`linear_update`), without :func:`linear_update`'s masks and
+        broadcasts.  Same info keys, shapes and dtypes, same numbers to
+        round-off.
+        """
+        if not _checked_measurement(z, (), self.measurement):
+            z = measurement_for_step(z, (), self.axes, k)
+        r = _axis_variances(np.asarray(self.measurement.cov(k), dtype=float))
+        idx = self._idx
+        x, P = state.mean[idx], state.cov[idx[:, :, None], idx[:, None, :]]
+        measured = ~np.isnan(z)
+
+        pred = self._predict(state.memory, x, P, z, measured, r, T, _matrices_one_run)
+        x_pred, P_pred = pred.mean, pred.cov
+        # A missing axis: zero innovation and gain, unit variance (as linear_update's masks).
+        S = np.where(measured, P_pred[:, 0, 0] + r, 1.0)
+        nu_full = z - x_pred[:, 0]
+        nu = np.where(measured, nu_full, 0.0)
+        K = P_pred[:, :, 0] * (measured / S)[:, None]
+        x_upd = x_pred + K * nu[:, None]
+        I_KH = np.empty_like(P_pred)
+        I_KH[:] = _eye3()
+        I_KH[:, :, 0] -= K
+        P_upd = _sandwich(I_KH, P_pred) + (r * K)[:, :, None] * K[:, None, :]
+        P_upd = symmetrize(np.where(measured[:, None, None], P_upd, P_pred))
+        nis_a = nu * nu / S
+        dof = measured.sum()
+        nis = np.where(measured, nis_a, 0.0).sum() if dof else np.float64(np.nan)
+        loglik = np.where(measured, -0.5 * (nis_a + np.log(S) + _LOG_2PI), 0.0).sum()
+        gated = np.array(False)
+        if self.gate is not None:
+            gated = gate_exceeded(self.gate, nis, dof, self.axes)
+            if gated:  # the prediction, in the axes' layout
+                x_upd, P_upd = x_pred, P_pred
+        memory = self._learn(pred.memory, x, x_pred, x_upd, measured & ~gated, T)
+
+        mean, cov = self._join(x_upd, P_upd)
+        pred_mean, pred_cov = self._join(x_pred, P_pred)
+        A = self.axes
+        lam = _per_axis(pred.lam, A)
+        S_mat = np.zeros((A, A))
+        S_mat.flat[:: A + 1] = S
+        info = {
+            "innovation": np.where(measured, nu_full, np.nan),
+            "S": S_mat,
+            "nis": np.asarray(nis),
+            "dof": np.asarray(dof),
+            "loglik": np.asarray(loglik),
+            "fading": lam.max(),
+            "axis_fading": lam,
+            "alpha": _per_axis(pred.alpha, A),
+            "sigma_a2": _per_axis(pred.sigma2, A),
+            "gated": gated,
+            "repaired": np.array(False),
+            **pred.info,
+            "pred_mean": pred_mean,
+            "pred_cov": pred_cov,
+            "cross_cov": self._join(x, P @ _t(pred.F))[1],
+        }
+        return AxisState(mean, cov, k, memory), info
+
     # -- hooks --------------------------------------------------------------------
     def _init_memory(self, x: np.ndarray, P: np.ndarray) -> dict[str, np.ndarray]:
         return {}
 
-    def _predict(self, memory, x, P, z, measured, r, T) -> "_AxisPrediction":
+    def _predict(self, memory, x, P, z, measured, r, T, matrices=None) -> "_AxisPrediction":
+        """The prediction of every axis; ``matrices(alpha, T)`` gives F, U, q for per-axis α (default :func:`_matrices_for`)."""
         raise NotImplementedError
 
     def _learn(self, memory, x_prev, x_pred, x_upd, measured, T) -> dict[str, np.ndarray]:
         """Memory for the next step; ``measured`` (*b, A) is False where the axis had no (accepted) measurement."""
         return memory
+
+
+def _per_axis(v: Any, A: int) -> np.ndarray:
+    """``np.broadcast_to(v, (A,))`` of one run without the broadcast machinery for an ``(A,)`` array."""
+    return v if type(v) is np.ndarray and v.shape == (A,) else np.full(A, v)
+
+
+def _axis_variances(R: np.ndarray) -> np.ndarray:
+    """:meth:`_AxisFilter._check_R` of one ``(A, A)`` matrix, remembered by its bytes (R is usually one constant matrix)."""
+    if R.ndim != 2:
+        return _AxisFilter._check_R(R)
+    return _axis_variances_of(R.tobytes(), R.shape[0])
+
+
+@lru_cache(maxsize=64)
+def _axis_variances_of(data: bytes, A: int) -> np.ndarray:
+    r = _AxisFilter._check_R(np.frombuffer(data).reshape(A, A)).copy()
+    r.setflags(write=False)
+    return r
 
 
 @dataclass(frozen=True)
@@ -421,7 +598,7 @@ class CurrentStatisticalFilter(_AxisFilter):
     def _default_name(self) -> str:
         return "CS"
 
-    def _predict(self, memory, x, P, z, measured, r, T):
+    def _predict(self, memory, x, P, z, measured, r, T, matrices=_matrices_for):
         a_bar = _acceleration_mean(x, self.mean)
         sigma2 = np.maximum(cs_variance(x[..., 2], self.a_max, self.a_neg_max), self.sigma_min**2)
         F, U, q = _matrices(self.alpha, T)
@@ -534,7 +711,7 @@ class AdaptiveCSFilter(_AxisFilter):
             s2 = self._clip(cs_variance(x[..., 2], self.a_max))
         return {"sigma2": s2, "V": np.full(x.shape[:-1], np.nan)}
 
-    def _predict(self, memory, x, P, z, measured, r, T):
+    def _predict(self, memory, x, P, z, measured, r, T, matrices=_matrices_for):
         a_bar = _acceleration_mean(x, self.mean)
         if self.variance == "rayleigh":
             sigma2 = self._clip(cs_variance(x[..., 2], self.a_max))
@@ -571,8 +748,13 @@ class AdaptiveCSFilter(_AxisFilter):
         else:
             alpha = np.full(ratio.shape, self.alpha0)
 
-        F, U, q = _matrices_for(alpha, T)
-        x_pred, P_pred, _, _ = _propagate(F, U, q, x, P, a_bar, sigma2, alpha, lam)
+        if matrices is _matrices_one_run and not detect.any():
+            # Nothing adapted (λ = 1, α = α0): the nominal prediction is the prediction, bit for bit.  Only
+            # in the step of one run: a batch's F is a broadcast view, whose products may round otherwise.
+            F, x_pred, P_pred = F0, x0, P0
+        else:
+            F, U, q = matrices(alpha, T)
+            x_pred, P_pred, _, _ = _propagate(F, U, q, x, P, a_bar, sigma2, alpha, lam)
         memory = {**memory, "V_step": V}
         info = {"maneuver": detect, "maneuver_stat": D}
         return _AxisPrediction(x_pred, P_pred, F, lam, alpha, sigma2, memory, info)
@@ -658,9 +840,9 @@ class ModifiedSingerFilter(_AxisFilter):
         warm = memory["count"] < self.warmup
         return np.where(warm, self.alpha_init, alpha), np.where(warm, self.sigma_init**2, sigma2)
 
-    def _predict(self, memory, x, P, z, measured, r, T):
+    def _predict(self, memory, x, P, z, measured, r, T, matrices=_matrices_for):
         alpha, sigma2 = self._estimates(memory, T)
-        F, U, q = _matrices_for(alpha, T)
+        F, U, q = matrices(alpha, T)
         x_pred, P_pred, _, _ = _propagate(F, U, q, x, P, np.zeros(x.shape[:-1]), sigma2, alpha)
         return _AxisPrediction(x_pred, P_pred, F, np.float64(1.0), alpha, sigma2, memory)
 

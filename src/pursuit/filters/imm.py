@@ -42,6 +42,12 @@ predicts from its mixed prior and μ = c̄, while ``innovation``, ``S``,
 ``loglik_mixture`` describe the rejected measurement.  (A step where some
 run is rejected runs the modes a second time, with the rejected runs'
 measurements set missing.)  Mode filters may carry gates of their own.
+
+One run without a batch axis (batch ``()``) takes
+:meth:`InteractingMultipleModel._one_run_step`: the same cycle on the modes
+stacked as ``(r, n)`` and ``(r, n, n)`` arrays, without einsum, each mode
+taking its own one-run step; equal to the general step to round-off.  A
+batch ``(1,)`` takes the general step (a run's bits do not depend on its batch).
 """
 
 from __future__ import annotations
@@ -51,16 +57,19 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .._linalg import inv_spd, logdet_spd, quad, symmetrize
+from .._linalg import inv_spd, logdet_spd, quad, small_inv_logdet, symmetrize
 from .._validation import in_range, time_step
 from ..gaussian import Gaussian
 from ..rng import RNGLike
 from .base import FilterBase, as_gaussian, prior_batch
+from .cs import AxisState
 from .gating import gate_exceeded
+from .gaussian import GaussianState
 
 __all__ = ["StateMap", "IMMState", "InteractingMultipleModel", "kinematic_map"]
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
+_PLAIN_STATES = (GaussianState, AxisState)
 
 
 @dataclass(frozen=True)
@@ -299,6 +308,16 @@ class InteractingMultipleModel(FilterBase):
         """One IMM cycle: mix, run every mode, update μ, combine."""
         k = state.k + 1 if k is None else int(k)
         dt = time_step(dt, k)
+        if not state.batch:
+            # One run without a batch axis.  A batch (1,) keeps the general step, whose bits equal those
+            # of the same run in a larger batch; the one-run maths agrees with it to round-off only.
+            return self._one_run_step(state, z, k, dt)
+        return self._general_step(state, z, k, dt)
+
+    def _general_step(
+        self, state: IMMState, z: np.ndarray, k: int, dt: float | None
+    ) -> tuple[IMMState, dict[str, np.ndarray]]:
+        """:meth:`step` for any batch, on ``(*b, r, ...)`` stacks through einsum."""
         batch = state.batch
         Pi = self.transition
         mu = state.probs
@@ -358,6 +377,94 @@ class InteractingMultipleModel(FilterBase):
                 info["repaired"] = info["repaired"] | np.broadcast_to(i["repaired"], batch)
         return IMMState(mean, cov, k, tuple(new_states), probs), info
 
+    def _one_run_step(
+        self, state: IMMState, z: np.ndarray, k: int, dt: float | None
+    ) -> tuple[IMMState, dict[str, np.ndarray]]:
+        """:meth:`_general_step` for one run without a batch axis, the M modes as one stacked array.
+
+        The mixing and the combination are matrix products of the ``(r, n)``
+        means and the ``(r, n·n)`` covariances with the weights (the spread
+        terms Σ_i w_ij d_ij d_ijᵀ as one stacked product), the mixture's
+        S⁻¹ and log det S in closed form for m ≤ 3: no einsum, no broadcast
+        to a batch.  Each mode takes its own step of one run.  Same info
+        keys, shapes and dtypes as the general step, same numbers to round-off.
+        """
+        Pi = self.transition
+        mu = state.probs
+        r = Pi.shape[0]
+        c_bar = mu.dot(Pi)
+        w = mu[:, None] * Pi  # w[i, j] = Π_ij μ_i
+        if c_bar.all():
+            w = w / c_bar
+        else:  # a mode no one can reach: its mixing weights are μ (as the general step)
+            w = np.where(c_bar > 0, w / np.where(c_bar > 0, c_bar, 1.0), mu[:, None])
+
+        X, P = self._common_one(state.modes)  # (r, n), (r, n, n)
+        n = X.shape[1]
+        x0 = w.T.dot(X)  # (j, n)
+        d = X[:, None, :] - x0[None, :, :]  # (i, j, n)
+        spread = np.matmul((d * w[:, :, None]).transpose(1, 2, 0), d.transpose(1, 0, 2))  # (j, n, n)
+        P0 = w.T.dot(P.reshape(r, n * n)).reshape(r, n, n) + spread
+        P0 = symmetrize(P0)
+        mixed = []
+        for j, s in enumerate(state.modes):
+            mj, cj = self._to_mode(j, x0[j], P0[j])
+            if type(s) in _PLAIN_STATES:  # their fields are mean, cov, k, memory: dataclasses.replace costs more
+                mixed.append(type(s)(mj, cj, s.k, s.memory))
+            else:
+                mixed.append(replace(s, mean=mj, cov=cj))
+        new_states, infos = self._step_modes(mixed, z, k, dt)
+        mode_ll = np.array([float(i["loglik"]) for i in infos])
+        mode_nis = np.array([float(i["nis"]) for i in infos])
+
+        gated = np.zeros((), dtype=bool)
+        used_ll = mode_ll
+        mode_infos = list(infos)
+        if self.gate is not None:
+            dof = np.asarray(infos[0]["dof"])
+            m = np.shape(infos[0]["innovation"])[-1]
+            gated = np.all(gate_exceeded(self.gate, mode_nis, dof, m))
+            if gated:
+                new_states, kept = self._step_modes(mixed, np.full(m, np.nan), k, dt)
+                used_ll = np.array([float(i["loglik"]) for i in kept])
+                mode_infos += kept
+
+        if c_bar.all():
+            log_prior = np.log(c_bar)
+        else:
+            with np.errstate(divide="ignore"):
+                log_prior = np.log(c_bar)
+        probs, loglik_mixture = _normalise(log_prior + used_ll)
+        if gated:  # the likelihood of the rejected measurement, as in the other keys
+            loglik_mixture = _normalise(log_prior + mode_ll)[1]
+
+        X, P = self._common_one(new_states)
+        mean = probs.dot(X)
+        d = X - mean
+        cov = symmetrize(probs.dot(P.reshape(r, n * n)).reshape(n, n) + (d.T * probs).dot(d))
+
+        info = _mixture_info_one(infos, c_bar)
+        info["mode_probs"] = probs
+        info["mode_loglik"] = mode_ll
+        info["mode_nis"] = mode_nis
+        info["loglik_mixture"] = loglik_mixture
+        info["gated"] = gated
+        repaired = False
+        for i in mode_infos:
+            if "repaired" in i:
+                repaired = repaired or bool(i["repaired"])
+        info["repaired"] = np.array(repaired)
+        return IMMState(mean, cov, k, tuple(new_states), probs), info
+
+    def _common_one(self, states) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_common` of one run: ``(r, n)`` and ``(r, n, n)``."""
+        means, covs = [], []
+        for j, s in enumerate(states):
+            m, c = self._to_common(j, s.mean, s.cov)
+            means.append(m)
+            covs.append(c)
+        return np.array(means), np.array(covs)
+
     def _step_modes(self, mixed, z, k, dt):
         states, infos = [], []
         for f, s0 in zip(self.filters, mixed):
@@ -373,6 +480,36 @@ def _normalise(log_post: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     e = np.exp(log_post - top)
     total = e.sum(axis=-1, keepdims=True)
     return e / total, (top + np.log(total))[..., 0]
+
+
+def _mixture_info_one(infos: list[dict[str, np.ndarray]], c_bar: np.ndarray) -> dict[str, np.ndarray]:
+    """:func:`_mixture_info` of one run: ``(r, m)`` innovations as plain arrays, S⁻¹ and log det S in closed form for m ≤ 3."""
+    nus = np.array([i["innovation"] for i in infos])  # (r, m)
+    r, m = nus.shape
+    Ss = np.array([i["S"] for i in infos]).reshape(r, m * m)
+    valid = ~np.isnan(nus[0])  # the same measurement for every mode
+    nus0 = np.where(valid, nus, 0.0)
+    nu = c_bar.dot(nus0)
+    d = nus0 - nu
+    S = symmetrize(c_bar.dot(Ss).reshape(m, m) + (d.T * c_bar).dot(d))
+    small = small_inv_logdet(S)
+    if small is None:  # m > 3, or a determinant the closed forms cannot trust
+        S_inv, logdet = inv_spd(S), float(logdet_spd(S))
+    else:
+        S_inv, logdet = small
+    dof = valid.sum()
+    if dof:
+        nis = float(nu.dot(S_inv).dot(nu))
+        loglik = -0.5 * (nis + logdet + dof * _LOG_2PI)
+    else:
+        nis, loglik = np.nan, 0.0
+    return {
+        "innovation": np.where(valid, nu, np.nan),
+        "S": S,
+        "nis": np.array(nis),
+        "dof": dof,
+        "loglik": np.array(loglik),
+    }
 
 
 def _mixture_info(infos: list[dict[str, np.ndarray]], c_bar: np.ndarray, batch: tuple[int, ...]) -> dict[str, np.ndarray]:
