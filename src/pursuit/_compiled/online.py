@@ -12,7 +12,9 @@ one run needs:
 * the state a step returned is recognised by identity on the next step, so
   its arrays go to the kernel as they are (views of the previous output);
 * ``z`` is checked by the kernel itself (its shape and dtype by Python), the
-  NumPy validation runs only for a ``z`` that is not already a float vector;
+  NumPy validation runs only for a ``z`` that is not already a float vector
+  (a read-only one, such as ``np.broadcast_to``'s view, is taken as it is:
+  no kernel writes ``z``);
 * the kernel is called through the entry point of its compiled overload
   (numba's dispatcher resolves the argument types on every call, about a
   tenth of a microsecond per argument), with arguments whose types the lane
@@ -23,12 +25,18 @@ one run needs:
   mapping with the keys of the NumPy step that slices each value on first
   access.
 
+The step of a tracking loop (the state the lane returned last, no ``k`` or
+``dt``, ``z`` a float64 vector of the run's shape) takes a fast path in
+:meth:`_Lane.__call__` that skips every branch of the general path
+(:meth:`_Lane.general`); both give the same bits.
+
 A KF/EKF with a linear measurement runs the generated kernel ``one``
 (:mod:`pursuit._compiled.kf_codegen`), written from the same body as the
 batched ``step`` kernel, so both give the same bits; other measurements and
-the UKF/CKF run :func:`pursuit._compiled.gauss_kernels.ekf_one` /
-``sigma_one``, which call the serial block kernel of the batched path on one
-lane (the same kernel) with its outputs as views of one vector.  Where the lane does not apply (a moving observer, a motion
+the UKF/CKF run the scalar one-run kernels of
+:mod:`pursuit._compiled.one_run_kernels` (``ekf_one_scalar`` /
+``sigma_one_scalar``), the block kernels' arithmetic for one run in the same
+order, again the same bits.  Where the lane does not apply (a moving observer, a motion
 model that changes with the step, a run whose covariance needs the NumPy
 repair, a batch other than ``()`` or ``(1,)``) it returns ``None`` and the
 filter takes its batched compiled step.
