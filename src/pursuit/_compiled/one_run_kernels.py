@@ -6,7 +6,8 @@ arrays allocated per call and a view made in every inner loop, which costs
 twenty times the arithmetic of a 4-state step.  The kernels here take the
 same arguments and write the same ``out`` (the rows of
 :func:`pursuit._compiled.kf_codegen.step_rows`), with plain loops over the
-states and sigma points of one run and one scratch vector per call.
+states and sigma points of one run and one scratch array per call, its
+views made by slicing (a reshape calls into numba's runtime, about 40 ns).
 
 Every sum, product and comparison is the block kernel's (``_ekf_step``,
 ``_sigma_step``, ``_sigma_correct``, ``_update_ws``, ``_chol``,
@@ -65,7 +66,7 @@ def _symmetrize(P):
 
 @njit(**_NJ)
 def _spd_inv(S, Si, ws):
-    """:func:`.gauss_kernels._spd_inv` for one matrix: ``(ok, log det S)``; ``ws`` scratch of 2 m² entries."""
+    """:func:`.gauss_kernels._spd_inv` for one matrix: ``(ok, log det S)``; ``ws`` scratch of 2 m rows."""
     m = S.shape[0]
     if m == 1:
         a = S[0, 0]
@@ -84,8 +85,8 @@ def _spd_inv(S, Si, ws):
         Si[1, 0] = -b * inv
         Si[1, 1] = a * inv
         return good, (math.log(det) if good else 0.0)
-    L = ws[:m * m].reshape((m, m))
-    Li = ws[m * m:2 * m * m].reshape((m, m))
+    L = ws[:m, :m]
+    Li = ws[m:2 * m, :m]
     ok = _chol(S, L)
     logdet = 0.0
     for j in range(m):
@@ -159,23 +160,21 @@ def _predict_moments(P_moments, Q, lam):
 
 @njit(**_NJ)
 def _update(xp, Pp, zp, Pzz, Pxz, L, HL, D, z, v, sensor, x_o, P_o, innov, S, ws):
-    """:func:`.gauss_kernels._update_ws` for one run: ``(ok, nis, dof, loglik)``; ``ws`` scratch (see :func:`_update_size`)."""
+    """:func:`.gauss_kernels._update_ws` for one run: ``(ok, nis, dof, loglik)``; ``ws`` scratch (see :func:`_update_rows`)."""
     R, angle, kind = sensor.R, sensor.angle, sensor.kind
     n = xp.shape[0]
     m = zp.shape[0]
-    nm = n * m
-    mm = m * m
-    nu = ws[0:m]
-    Reff = ws[m:m + mm].reshape((m, m))
-    Si = ws[m + mm:m + 2 * mm].reshape((m, m))
-    w0 = m + 2 * mm
-    Pxm = ws[w0:w0 + nm].reshape((n, m))
-    K = ws[w0 + nm:w0 + 2 * nm].reshape((n, m))
-    KN = ws[w0 + 2 * nm:w0 + 3 * nm].reshape((n, m))
-    w1 = w0 + 3 * nm
-    AL = ws[w1:w1 + n * n].reshape((n, n))
-    T2 = ws[w1 + n * n:w1 + 2 * n * n].reshape((n, n))
-    rest = ws[w1 + 2 * n * n:]
+    # views of the 2-D scratch by slicing (a reshape calls into numba's runtime: ~40 ns each)
+    nu = ws[0, :m]
+    Reff = ws[1:1 + m, :m]
+    Si = ws[1 + m:1 + 2 * m, :m]
+    r = 1 + 2 * m
+    Pxm = ws[r:r + n, :m]
+    K = ws[r + n:r + 2 * n, :m]
+    KN = ws[r + 2 * n:r + 3 * n, :m]
+    AL = ws[r + 3 * n:r + 4 * n, :n]
+    T2 = ws[r + 4 * n:r + 5 * n, :n]
+    rest = ws[r + 5 * n:, :]
     for a in range(m):
         d = z[a] - zp[a]
         if wraps(kind, angle, a):
@@ -231,8 +230,9 @@ def _update(xp, Pp, zp, Pzz, Pxz, L, HL, D, z, v, sensor, x_o, P_o, innov, S, ws
 
 
 @njit(**_NJ)
-def _update_size(n, m):
-    return m + 4 * m * m + 3 * n * m + 2 * n * n
+def _update_rows(n, m):
+    """Rows of :func:`_update`'s scratch (``max(n, m)`` columns, as every scratch here)."""
+    return 1 + 4 * m + 5 * n
 
 
 @njit(**_NJ)
@@ -249,22 +249,23 @@ def ekf_one_scalar(x, P, z, prediction, sensor, out):
     F, Q, lam = prediction
     n = x.shape[0]
     m = z.shape[0]
-    nn = n * n
-    ws = np.empty(2 * m + nn + 3 * m * n + 2 * m * m + _update_size(n, m))
-    v = ws[0:m]
+    w = max(n, m)
+    ws = np.empty((2 + n + 3 * m + n + 2 * m + _update_rows(n, m), w))
+    v = ws[0, :m]
     if _measured(z, v):
         return 1
     x_o, xp, P_o, Pp, cross, innov, S, at = _outputs(out, n, m)
-    L = ws[m:m + nn].reshape((n, n))
-    zp = ws[m + nn:2 * m + nn]
-    w0 = 2 * m + nn
-    H = ws[w0:w0 + m * n].reshape((m, n))
-    HL = ws[w0 + m * n:w0 + 2 * m * n].reshape((m, n))
-    PHt = ws[w0 + 2 * m * n:w0 + 3 * m * n].reshape((n, m))
-    w1 = w0 + 3 * m * n
-    Pzz = ws[w1:w1 + m * m].reshape((m, m))
-    D = ws[w1 + m * m:w1 + 2 * m * m].reshape((m, m))
-    upd = ws[w1 + 2 * m * m:]
+    zp = ws[1, :m]
+    L = ws[2:2 + n, :n]
+    r = 2 + n
+    Hb = np.zeros((1, m, n))  # jac_row writes H[0]; the entries a model leaves out stay zero
+    H = Hb[0]
+    HL = ws[r + m:r + 2 * m, :n]
+    Pzz = ws[r + 2 * m:r + 3 * m, :m]
+    PHt = ws[r + 3 * m:r + 3 * m + n, :m]
+    r += 3 * m + n
+    D = ws[r:r + m, :m]
+    upd = ws[r + m:, :]
     # predict: xp = F x, cross = P Fᵀ, P⁻ = F cross (then λ, Q)
     for i in range(n):
         o = 0.0
@@ -280,9 +281,9 @@ def ekf_one_scalar(x, P, z, prediction, sensor, out):
     _mm(F, cross, Pp)
     _predict_moments(Pp, Q, lam)
     # linearise h at the prediction
-    h_row(sensor, xp.reshape((1, n)), 0, zp.reshape((1, m)), 0)
-    H[:] = 0.0
-    jac_row(sensor, xp.reshape((1, n)), 0, H.reshape((1, m, n)), 0)
+    xp2 = out[n:2 * n].reshape((1, n))
+    h_row(sensor, xp2, 0, ws[1:2, :m], 0)
+    jac_row(sensor, xp2, 0, Hb, 0)
     _mmT(Pp, H, PHt)
     _mm(H, PHt, Pzz)
     ok = _chol(Pp, L)
@@ -301,32 +302,29 @@ def sigma_one_scalar(x, P, z, prediction, sensor, sigma, out):
     angle, kind = sensor.angle, sensor.kind
     n = x.shape[0]
     m = z.shape[0]
-    nn = n * n
     npts = wm.shape[0]
-    pn = npts * n
-    pm = npts * m
-    ws = np.empty(m + nn + 2 * pn + pn + m + 2 * pm + pm + 2 * m * m + 2 * n * m + _update_size(n, m))
-    v = ws[0:m]
+    w = max(n, m)
+    ws = np.empty((2 + n + 3 * npts + 3 * npts + 3 * m + n + _update_rows(n, m), w))
+    v = ws[0, :m]
     if _measured(z, v):
         return 1
     x_o, xp, P_o, Pp, cross, innov, S, at = _outputs(out, n, m)
-    L = ws[m:m + nn].reshape((n, n))
-    w0 = m + nn
-    chi = ws[w0:w0 + pn].reshape((npts, n))
-    Y = ws[w0 + pn:w0 + 2 * pn].reshape((npts, n))
-    dY = ws[w0 + 2 * pn:w0 + 3 * pn].reshape((npts, n))
-    w1 = w0 + 3 * pn
-    zp = ws[w1:w1 + m]
-    Z = ws[w1 + m:w1 + m + pm].reshape((npts, m))
-    dZ = ws[w1 + m + pm:w1 + m + 2 * pm].reshape((npts, m))
-    E = ws[w1 + m + 2 * pm:w1 + m + 3 * pm].reshape((npts, m))
-    w2 = w1 + m + 3 * pm
-    Pzz = ws[w2:w2 + m * m].reshape((m, m))
-    D = ws[w2 + m * m:w2 + 2 * m * m].reshape((m, m))
-    w3 = w2 + 2 * m * m
-    Pxz = ws[w3:w3 + n * m].reshape((n, m))
-    GT = ws[w3 + n * m:w3 + 2 * n * m].reshape((m, n))
-    upd = ws[w3 + 2 * n * m:]
+    zp = ws[1, :m]
+    L = ws[2:2 + n, :n]
+    r = 2 + n
+    chi = ws[r:r + npts, :n]
+    Y = ws[r + npts:r + 2 * npts, :n]
+    dY = ws[r + 2 * npts:r + 3 * npts, :n]
+    r += 3 * npts
+    Z = ws[r:r + npts, :m]
+    dZ = ws[r + npts:r + 2 * npts, :m]
+    E = ws[r + 2 * npts:r + 3 * npts, :m]
+    r += 3 * npts
+    Pzz = ws[r:r + m, :m]
+    D = ws[r + m:r + 2 * m, :m]
+    GT = ws[r + 2 * m:r + 3 * m, :n]
+    Pxz = ws[r + 3 * m:r + 3 * m + n, :m]
+    upd = ws[r + 3 * m + n:, :]
     off = 1 if centre else 0
     # predict: points of (x, P), pushed through F
     ok = _chol(P, L)
