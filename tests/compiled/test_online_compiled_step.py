@@ -288,3 +288,19 @@ def test_the_fast_path_equals_the_general_path():
         assert s.k == fast[k][0].k == k + 1
         for key in INFO_KEYS:
             assert np.array_equal(info[key], fast[k][1][key], equal_nan=True), key
+
+
+@pytest.mark.parametrize("batch", [(), (1,)])
+def test_a_bad_measurement_on_the_fast_path_raises_as_on_the_general_path(batch):
+    """An infinite or huge z in a chained step (the fast path) raises the general path's error, naming the step."""
+    filt, _ = _filters(pu.UnscentedKalmanFilter, RB)
+    s, _ = filt.step(filt.init(pu.Gaussian(X0, COV0), batch=batch), np.array([60.0, 1.0]).reshape(batch + (2,)))
+    for bad in (np.array([np.inf, 1.0]), np.array([60.0, 1e200])):
+        z = bad.reshape(batch + (2,))
+        with pytest.raises(ValueError) as fast:
+            filt.step(s, z)
+        with pytest.raises(ValueError) as general:
+            filt.step(s, z, k=2)
+        assert str(fast.value) == str(general.value) and "step 2" in str(fast.value)
+    s2, info = filt.step(s, np.array([61.0, 1.01]).reshape(batch + (2,)))  # the lane goes on from s
+    assert isinstance(info, StepInfo) and s2.k == 2

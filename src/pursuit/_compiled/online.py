@@ -203,8 +203,10 @@ class _Lane:
         if state is self.chained and k is None and dt is None and type(z) is np.ndarray and z.dtype is _F64 \
                 and z.shape == self.zshape and z.strides[-1] == 8:
             out = np.empty(self.size)
-            if self.call(self.x, self.P, z[0] if self.batch else z, *self.packed, out):
-                no_infinite_measurement(z, state.k + 1)  # raises, naming the step
+            if self.batch:
+                z = z[0]
+            if self.call(self.x, self.P, z, *self.packed, out):
+                no_infinite_measurement(z, state.k + 1)  # raises, naming the step (as the general path)
             if out[self.ok_row] != 0.0 and self.gate is None:
                 new = _new(GaussianState)
                 x, P = out[:self.n], out[self.px:self.pn].reshape(self.nn)
