@@ -12,6 +12,7 @@ process, so the ratio is what to compare across machines.
 ``rows()`` is what ``bench_online.py`` imports.  Run::
 
     PYTHONPATH=src taskset -c 1 .bench-venv/bin/python benchmarks/_online_compiled.py
+    PYTHONPATH=src taskset -c 1 .bench-venv/bin/python benchmarks/_online_compiled.py --cpu   # CPU time, on a loaded machine
 """
 
 from __future__ import annotations
@@ -33,6 +34,9 @@ import numpy as np  # noqa: E402
 import pursuit as pu  # noqa: E402
 from pursuit.models import ConstantVelocity, LinearGaussian, RangeBearing  # noqa: E402
 
+# wall time; with --cpu the process's CPU time, which leaves out the time other jobs hold the core
+# (on a loaded machine the wall time of a pinned process counts their slices too)
+_clock = time.perf_counter
 SENSOR = (0.0, -50.0)
 SIG_R, SIG_B = 1.0, 0.02
 PF_PARTICLES = 1000
@@ -59,15 +63,18 @@ def _per_step(fn, steps: int, repeat: int) -> float:
     fn()
     times = []
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0 = _clock()
         fn()
-        times.append(time.perf_counter() - t0)
+        times.append(_clock() - t0)
     return statistics.median(times) / steps * 1e6
 
 
-def _pursuit_pass(filt, prior, zs, rng=None):
+def _pursuit_pass(filt, prior, zs, rng=None, batch=()):
+    if batch:
+        zs = zs[:, None, :]  # (steps, 1, m): one run with a batch axis
+
     def go():
-        s = filt.init(prior, rng=rng) if rng is not None else filt.init(prior)
+        s = filt.init(prior, batch=batch, rng=rng) if rng is not None else filt.init(prior, batch=batch)
         step = filt.step
         for z in zs:
             s, _ = step(s, z)
@@ -75,7 +82,7 @@ def _pursuit_pass(filt, prior, zs, rng=None):
 
 
 def rows(steps: int = 2000, repeat: int = 5) -> list[tuple[str, str, float]]:
-    """``(name, "numba", µs per step)`` for the KF, EKF, UKF and bootstrap PF (N = 1000), one run stepped from Python."""
+    """``(name, "numba", µs per step)`` for the KF, EKF, UKF (batch ``()``, then ``(1,)``) and bootstrap PF (N = 1000), one run stepped from Python."""
     motion = _motion()
     lin = LinearGaussian.position(4, motion.position_indices, 1.0)
     rb = RangeBearing(np.array(SENSOR), SIG_R, SIG_B)
@@ -90,6 +97,7 @@ def rows(steps: int = 2000, repeat: int = 5) -> list[tuple[str, str, float]]:
             ("UKF (range-bearing)", pu.UnscentedKalmanFilter(motion, rb, backend="numba"), zr),
         ]:
             out.append((name, "numba", _per_step(_pursuit_pass(filt, prior, zs), steps, repeat)))
+            out.append((f"{name}, batch (1,)", "numba", _per_step(_pursuit_pass(filt, prior, zs, batch=(1,)), steps, repeat)))
         pf = pu.BootstrapParticleFilter(motion, rb, particles=PF_PARTICLES, backend="numba")
         pf_steps = max(steps // 10, 10)  # a PF step costs a hundred KF steps
         rng = np.random.default_rng(5)
@@ -132,7 +140,10 @@ def filterpy_rows(steps: int = 2000, repeat: int = 5) -> list[tuple[str, str, fl
 
 
 def floor_rows(steps: int = 20000, repeat: int = 5) -> list[tuple[str, float]]:
-    """``(piece, µs)``: where one compiled KF step's time goes (the lane's own pieces, timed alone in this process)."""
+    """``(piece, µs)``: where one compiled KF step's time goes (the lane's own pieces, timed alone in this process),
+    then the EKF/UKF kernels: the serial block kernel on one lane against the scalar one-run kernel the lane calls."""
+    from pursuit._compiled import gauss_kernels as GK
+    from pursuit._compiled import one_run_kernels as OS
     from pursuit._compiled.online import StepInfo, _new_state
 
     motion = _motion()
@@ -156,12 +167,21 @@ def floor_rows(steps: int = 20000, repeat: int = 5) -> list[tuple[str, float]]:
         return go
 
     chain = [s1]
+    z_ro = np.broadcast_to(z, z.shape)  # read-only, as bench_online.py passes z
 
     def full():  # chained, as a tracking loop steps: the lane recognises its own last state
         chain[0] = filt.step(chain[0], z)[0]
 
+    def full_ro():
+        chain[0] = filt.step(chain[0], z_ro)[0]
+
+    def general():  # k given: the lane's general path (z re-checked, the model looked up)
+        chain[0] = filt.step(chain[0], z, k=chain[0].k + 1)[0]
+
     pieces = [
         ("whole step: state = filt.step(state, z)[0]", full),
+        ("whole step, z read-only (np.broadcast_to, as bench_online.py)", full_ro),
+        ("whole step through the lane's general path (k given)", general),
         ("kernel through numba's dispatcher (5 arguments)", lambda: kernel(x, P, z, c, out)),
         ("kernel through its entry point (what the lane calls)", lambda: call(x, P, z, c, out)),
         ("np.empty of the output vector", lambda: np.empty(lane.size)),
@@ -169,10 +189,36 @@ def floor_rows(steps: int = 20000, repeat: int = 5) -> list[tuple[str, float]]:
         ("info: StepInfo (lazy; nothing sliced)", lambda: StepInfo(lane, out, (), False)),
         ("reference: a + a on a 4-vector (NumPy ufunc call)", lambda: a + a),
     ]
+    rb = RangeBearing(np.array(SENSOR), SIG_R, SIG_B)
+    zr = np.array([60.0, 0.1])
+    for label, cls, block, scalar in [("EKF", pu.ExtendedKalmanFilter, GK.ekf_one, OS.ekf_one_scalar),
+                                      ("UKF", pu.UnscentedKalmanFilter, GK.sigma_one, OS.sigma_one_scalar)]:
+        f = cls(motion, rb, backend="numba")
+        t1, _ = f.step(f.init(prior), zr)
+        ln = vars(f)["_online_lane"]
+        args = (t1.mean, t1.cov, zr, *ln.model(None))
+        o = np.empty(ln.size)
+        block(*args, o)  # compiles or loads
+        types = tuple(block.typeof_pyval(v) for v in (*args, o))
+        b_call, s_call = block.overloads[types].entry_point, scalar.overloads[types].entry_point
+        ch = [t1]
+
+        def whole(f=f, ch=ch):
+            ch[0] = f.step(ch[0], zr)[0]
+
+        pieces += [
+            (f"{label} (range-bearing) whole step", whole),
+            (f"{label} kernel: serial block kernel on one lane (before)", lambda c=b_call, a=args, o=o: c(*a, o)),
+            (f"{label} kernel: scalar one-run kernel (what the lane calls)", lambda c=s_call, a=args, o=o: c(*a, o)),
+        ]
     return [(name, _per_step(loop(fn), steps, repeat)) for name, fn in pieces]
 
 
 def main() -> None:
+    global _clock
+    if "--cpu" in sys.argv:
+        _clock = time.process_time
+        print("(CPU time of this process: time.process_time)\n")
     print("| piece of one compiled KF step | µs |")
     print("|---|---|")
     for name, t in floor_rows():

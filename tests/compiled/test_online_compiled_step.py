@@ -17,7 +17,7 @@ pytest.importorskip("numba")
 
 import pursuit as pu  # noqa: E402
 from pursuit._compiled.online import INFO_KEYS, StepInfo  # noqa: E402
-from pursuit.models import ConstantVelocity, LinearGaussian, RangeBearing  # noqa: E402
+from pursuit.models import ConstantVelocity, LinearGaussian, RangeBearing, RangeSensors  # noqa: E402
 
 MOTION = ConstantVelocity(ndim=2, dt=1.0, q=0.05)
 LINEAR = LinearGaussian.position(4, (0, 2), 1.0)
@@ -204,3 +204,103 @@ def test_the_step_info_pickles_as_the_numpy_steps_dict():
     assert type(got) is dict and list(got) == list(want) + ["extra"]
     for key in want:
         np.testing.assert_allclose(np.broadcast_to(got[key], np.shape(want[key])), want[key], rtol=1e-9, atol=1e-12)
+
+
+# -- the scalar one-run EKF and UKF/CKF kernels (pursuit._compiled.one_run_kernels) -----------------------
+def _lane_of(filt, z):
+    """The online lane of a compiled filter, made by one step."""
+    filt.step(filt.init(pu.Gaussian(X0, COV0)), z)
+    return vars(filt)["_online_lane"]
+
+
+SCALAR_SENSORS = [
+    ("range-bearing, bearings wrap", RangeBearing(np.array([0.0, 0.0]), 1.0, 0.02), np.array([-50.0, 1.0, 0.3, 0.5])),
+    ("one range (m = 1)", RangeSensors(np.array([[0.0, 0.0]]), 2.0), X0),
+    ("three ranges (m = 3, S inverted through its Cholesky factor)", RangeSensors(np.array([[0.0, 0.0], [100.0, 0.0], [0.0, 100.0]]), 2.0), X0),
+]
+
+
+@pytest.mark.parametrize("cls", [pu.ExtendedKalmanFilter, pu.UnscentedKalmanFilter, pu.CubatureKalmanFilter])
+@pytest.mark.parametrize("label, meas, centre", SCALAR_SENSORS, ids=[s[0] for s in SCALAR_SENSORS])
+@pytest.mark.parametrize("fading", [1.0, 1.05])
+def test_scalar_kernels_give_the_block_kernels_bits(cls, label, meas, centre, fading):
+    """The lane's scalar kernel against the serial block kernel on one lane, the same arguments: the same bits."""
+    from pursuit._compiled import gauss_kernels as GK
+    from pursuit._compiled import one_run_kernels as OS
+
+    filt = cls(MOTION, meas, backend="numba", fading=fading)
+    m = meas.dim
+    rng = np.random.default_rng(11)
+    lane = _lane_of(filt, meas.sample(centre, 1, rng))
+    packed = lane.model(None)
+    sigma = cls is not pu.ExtendedKalmanFilter
+    scalar, block = (OS.sigma_one_scalar, GK.sigma_one) if sigma else (OS.ekf_one_scalar, GK.ekf_one)
+    assert lane.kernel is scalar
+    missing = [np.zeros(m, bool), np.ones(m, bool)] + ([np.arange(m) == 0] if m > 1 else [])
+    for trial in range(60):
+        x = centre + rng.normal(0.0, 2.0, 4)
+        A = rng.normal(0.0, 1.0, (4, 4))
+        P = A @ A.T + np.diag(rng.uniform(0.1, 3.0, 4))
+        z = meas.sample(x, 1, rng)
+        z[missing[trial % len(missing)]] = np.nan
+        a, b = np.empty(lane.size), np.empty(lane.size)
+        assert scalar(x, P, z, *packed, a) == block(x, P, z, *packed, b) == 0
+        assert np.array_equal(a, b, equal_nan=True), (trial, np.flatnonzero(~((a == b) | (np.isnan(a) & np.isnan(b)))))
+    # a covariance that does not factor is flagged alike (the lane then hands the step to the batched path)
+    a, b = np.empty(lane.size), np.empty(lane.size)
+    bad_P = -np.eye(4)
+    scalar(centre, bad_P, z, *packed, a)
+    block(centre, bad_P, z, *packed, b)
+    assert a[lane.ok_row] == b[lane.ok_row] == 0.0
+    # an infinite measurement is refused by both
+    z_inf = np.full(m, np.inf)
+    assert scalar(centre, COV0, z_inf, *packed, a) == block(centre, COV0, z_inf, *packed, b) == 1
+
+
+@pytest.mark.parametrize("name, cls, meas", [CASES[0], CASES[3]])
+@pytest.mark.parametrize("batch", [(), (1,)])
+def test_read_only_measurements_take_the_lane(name, cls, meas, batch):
+    """A read-only z (np.broadcast_to's view, as benchmarks/bench_online.py passes it) steps as a writable copy does."""
+    zs = _measurements(meas)
+    filt, _ = _filters(cls, meas)
+    writable = _steps(filt, zs, batch, [None] * T)
+    s = filt.init(pu.Gaussian(X0, COV0), batch=batch)
+    for k in range(T):
+        z = np.broadcast_to(zs[k], batch + zs[k].shape)
+        assert not z.flags.writeable
+        s, info = filt.step(s, z)
+        assert isinstance(info, StepInfo)
+        w, winfo = writable[k]
+        assert np.array_equal(s.mean, w.mean) and np.array_equal(s.cov, w.cov)
+        for key in INFO_KEYS:
+            assert np.array_equal(info[key], winfo[key], equal_nan=True), key
+
+
+def test_the_fast_path_equals_the_general_path():
+    """The chained step (the lane's fast path) and a step through its general path (``k`` given) agree bit for bit."""
+    zs = _measurements(LINEAR)
+    filt, _ = _filters(pu.KalmanFilter, LINEAR)
+    fast = _steps(filt, zs, (), [None] * T)
+    s = filt.init(pu.Gaussian(X0, COV0))
+    for k in range(T):
+        s, info = filt.step(s, zs[k], k=k + 1)
+        assert np.array_equal(s.mean, fast[k][0].mean) and np.array_equal(s.cov, fast[k][0].cov)
+        assert s.k == fast[k][0].k == k + 1
+        for key in INFO_KEYS:
+            assert np.array_equal(info[key], fast[k][1][key], equal_nan=True), key
+
+
+@pytest.mark.parametrize("batch", [(), (1,)])
+def test_a_bad_measurement_on_the_fast_path_raises_as_on_the_general_path(batch):
+    """An infinite or huge z in a chained step (the fast path) raises the general path's error, naming the step."""
+    filt, _ = _filters(pu.UnscentedKalmanFilter, RB)
+    s, _ = filt.step(filt.init(pu.Gaussian(X0, COV0), batch=batch), np.array([60.0, 1.0]).reshape(batch + (2,)))
+    for bad in (np.array([np.inf, 1.0]), np.array([60.0, 1e200])):
+        z = bad.reshape(batch + (2,))
+        with pytest.raises(ValueError) as fast:
+            filt.step(s, z)
+        with pytest.raises(ValueError) as general:
+            filt.step(s, z, k=2)
+        assert str(fast.value) == str(general.value) and "step 2" in str(fast.value)
+    s2, info = filt.step(s, np.array([61.0, 1.01]).reshape(batch + (2,)))  # the lane goes on from s
+    assert isinstance(info, StepInfo) and s2.k == 2

@@ -12,7 +12,9 @@ one run needs:
 * the state a step returned is recognised by identity on the next step, so
   its arrays go to the kernel as they are (views of the previous output);
 * ``z`` is checked by the kernel itself (its shape and dtype by Python), the
-  NumPy validation runs only for a ``z`` that is not already a float vector;
+  NumPy validation runs only for a ``z`` that is not already a float vector
+  (a read-only one, such as ``np.broadcast_to``'s view, is taken as it is:
+  no kernel writes ``z``);
 * the kernel is called through the entry point of its compiled overload
   (numba's dispatcher resolves the argument types on every call, about a
   tenth of a microsecond per argument), with arguments whose types the lane
@@ -23,12 +25,18 @@ one run needs:
   mapping with the keys of the NumPy step that slices each value on first
   access.
 
+The step of a tracking loop (the state the lane returned last, no ``k`` or
+``dt``, ``z`` a float64 vector of the run's shape) takes a fast path in
+:meth:`_Lane.__call__` that skips every branch of the general path
+(:meth:`_Lane.general`); both give the same bits.
+
 A KF/EKF with a linear measurement runs the generated kernel ``one``
 (:mod:`pursuit._compiled.kf_codegen`), written from the same body as the
 batched ``step`` kernel, so both give the same bits; other measurements and
-the UKF/CKF run :func:`pursuit._compiled.gauss_kernels.ekf_one` /
-``sigma_one``, which call the serial block kernel of the batched path on one
-lane (the same kernel) with its outputs as views of one vector.  Where the lane does not apply (a moving observer, a motion
+the UKF/CKF run the scalar one-run kernels of
+:mod:`pursuit._compiled.one_run_kernels` (``ekf_one_scalar`` /
+``sigma_one_scalar``), the block kernels' arithmetic for one run in the same
+order, again the same bits.  Where the lane does not apply (a moving observer, a motion
 model that changes with the step, a run whose covariance needs the NumPy
 repair, a batch other than ``()`` or ``(1,)``) it returns ``None`` and the
 filter takes its batched compiled step.
@@ -44,7 +52,7 @@ import numpy as np
 from .._validation import measurement_for_step, no_infinite_measurement, time_step
 from ..filters.gating import gate_exceeded, keep_prediction
 from ..filters.gaussian import GaussianState
-from . import gauss_kernels as GK
+from . import one_run_kernels as OS
 from . import generated, kf_codegen
 from .kernel_args import Prediction, SigmaPoints
 from .specs import LINEAR, M_LINEAR
@@ -57,6 +65,7 @@ INFO_KEYS = ("innovation", "S", "nis", "dof", "loglik", "fading", "faded", "repa
 
 _F64 = np.dtype(np.float64)
 _MAX_DT_CACHE = 64  # distinct dt values whose packed model is kept
+_new = object.__new__
 
 
 def _new_state(mean: np.ndarray, cov: np.ndarray, k: int) -> GaussianState:
@@ -76,15 +85,14 @@ class StepInfo(MutableMapping):
     first makes every value, after which it is an ordinary mapping.
     """
 
-    __slots__ = ("_lane", "_out", "_batch", "_gated", "_made", "_full")
+    __slots__ = ("_lane", "_out", "_batch", "_gated", "_made")
 
     def __init__(self, lane: Any, out: Any, batch: tuple[int, ...], gated: bool):
-        self._lane = lane
+        self._lane = lane  # None once every value is made (an ordinary mapping from then on)
         self._out = out
         self._batch = batch
         self._gated = gated
         self._made: dict[str, Any] | None = None
-        self._full = False
 
     def __getitem__(self, key: str) -> Any:
         made = self._made
@@ -92,17 +100,17 @@ class StepInfo(MutableMapping):
             made = self._made = {}
         elif key in made:
             return made[key]
-        if self._full or key not in INFO_KEYS:
+        if self._lane is None or key not in INFO_KEYS:
             raise KeyError(key)
         value = self._lane.info_value(key, self._out, self._batch, self._gated)
         made[key] = value
         return value
 
     def _fill(self) -> dict[str, Any]:
-        if not self._full:
+        if self._lane is not None:
             for key in INFO_KEYS:
                 self[key]
-            self._full = True
+            self._lane = None
         return self._made
 
     def __setitem__(self, key: str, value: Any) -> None:
@@ -112,13 +120,13 @@ class StepInfo(MutableMapping):
         del self._fill()[key]
 
     def __iter__(self) -> Iterator[str]:
-        return iter(self._made) if self._full else iter(INFO_KEYS)
+        return iter(INFO_KEYS) if self._lane is not None else iter(self._made)
 
     def __len__(self) -> int:
-        return len(self._made) if self._full else len(INFO_KEYS)
+        return len(INFO_KEYS) if self._lane is not None else len(self._made)
 
     def __contains__(self, key: object) -> bool:
-        return key in self._made if self._full else key in INFO_KEYS
+        return key in INFO_KEYS if self._lane is not None else key in self._made
 
     def __repr__(self) -> str:
         return f"StepInfo({dict(self)!r})"
@@ -149,12 +157,20 @@ class _Lane:
         self.gate = filt.gate
         self.kernel, self.pack = kernel, pack
         self.call: Callable | None = None
-        self.last: tuple | None = None  # (the state the last step returned, its x, its P, its batch)
+        # the state the last step returned, its x and P as the kernel takes them, its batch; ``chained`` is
+        # that state where the next step may take the fast path (the model at the default dt is packed)
+        self.last = self.chained = None
+        self.x = self.P = None
+        self.batch: tuple[int, ...] | None = None
+        self.zshape = self.bx = self.bP = None
+        self.packed: tuple | None = None
+        self.nn = (n, n)
         self.models: dict[float | None, tuple | None] = {}
         rows = kf_codegen.step_rows(n, self.m)
         self.rows = rows
         self.size = sum(c for _, c in rows.values())
         self.px = rows["P"][0]
+        self.pn = self.px + n * n
         self.ok_row = rows["ok"][0]
 
     def model(self, dt: float | None) -> tuple | None:
@@ -182,10 +198,33 @@ class _Lane:
         return np.array(mean.reshape(n), dtype=float), np.array(cov.reshape(n, n), dtype=float), batch
 
     def __call__(self, state: GaussianState, z: Any, k: int | None, dt: Any):
+        # the tracking loop's step first (the state this lane returned last, the model's own k and dt, z a
+        # float vector whose elements are adjacent): no branch of the general path below is needed
+        if state is self.chained and k is None and dt is None and type(z) is np.ndarray and z.dtype is _F64 \
+                and z.shape == self.zshape and z.strides[-1] == 8:
+            out = np.empty(self.size)
+            if self.batch:
+                z = z[0]
+            if self.call(self.x, self.P, z, *self.packed, out):
+                no_infinite_measurement(z, state.k + 1)  # raises, naming the step (as the general path)
+            if out[self.ok_row] != 0.0 and self.gate is None:
+                new = _new(GaussianState)
+                x, P = out[:self.n], out[self.px:self.pn].reshape(self.nn)
+                if self.batch:
+                    new.__dict__.update(mean=x.reshape(self.bx), cov=P.reshape(self.bP), k=state.k + 1, memory=None)
+                else:
+                    new.__dict__.update(mean=x, cov=P, k=state.k + 1, memory=None)
+                self.last = self.chained = new
+                self.x, self.P = x, P
+                return new, StepInfo(self, out, self.batch, False)
+            return self.finish(out, state.k + 1, self.batch)
+        return self.general(state, z, k, dt)
+
+    def general(self, state: GaussianState, z: Any, k: int | None, dt: Any):
+        """Any step the lane takes: a state it did not return, a given ``k`` or ``dt``, any ``z``."""
         k = state.k + 1 if k is None else int(k)
-        last = self.last
-        if last is not None and last[0] is state:
-            x, P, batch = last[1], last[2], last[3]
+        if state is self.last:
+            x, P, batch = self.x, self.P, self.batch
         else:
             got = self.start(state)
             if got is None:
@@ -197,22 +236,29 @@ class _Lane:
             if model is None:
                 return None
         m = self.m
-        if not (type(z) is np.ndarray and z.dtype is _F64 and z.flags.carray and (z.shape == (m,) or (batch and z.shape == (1, m)))):
+        if not (type(z) is np.ndarray and z.dtype is _F64 and z.flags.c_contiguous
+                and (z.shape == (m,) or (batch and z.shape == (1, m)))):
             z = _vector(z, m, batch, k)
         elif z.ndim == 2:
             z = z[0]
+        # a read-only z (np.broadcast_to's view, a memory map) goes in as it is: no kernel writes z
         out = np.empty(self.size)
         call = self.call
         if call is None:  # the first step: through the dispatcher (compiles or loads), then its entry point
-            self.kernel(x, P, z, *model, out)
-            call = self.call = self.kernel.overloads[tuple(self.kernel.typeof_pyval(a) for a in (x, P, z, *model, out))].entry_point
+            zw = z if z.flags.writeable else z.copy()  # the overload the lane calls is the one for writable arrays
+            self.kernel(x, P, zw, *model, out)
+            call = self.call = self.kernel.overloads[tuple(self.kernel.typeof_pyval(a) for a in (x, P, zw, *model, out))].entry_point
         if call(x, P, z, *model, out):
             no_infinite_measurement(z, k)  # raises, naming the step
+        return self.finish(out, k, batch)
+
+    def finish(self, out: np.ndarray, k: int, batch: tuple[int, ...]):
+        """The state and info of a step whose kernel wrote ``out``, or None where the batched step must repair."""
         if out[self.ok_row] == 0.0:
             return None  # a covariance does not factor: the batched step repairs it with NumPy
         n = self.n
         x_new = out[:n]
-        P_new = out[self.px:self.px + n * n].reshape(n, n)
+        P_new = out[self.px:self.pn].reshape(n, n)
         gated = False
         if self.gate is not None:
             x_new, P_new, gated = self.gated(out, x_new, P_new)
@@ -220,8 +266,19 @@ class _Lane:
             new = _new_state(x_new.reshape(1, n), P_new.reshape(1, n, n), k)
         else:
             new = _new_state(x_new, P_new, k)
-        self.last = (new, x_new, P_new, batch)
+        self.remember(new, x_new, P_new, batch)
         return new, StepInfo(self, out, batch, gated)
+
+    def remember(self, state: GaussianState, x: np.ndarray, P: np.ndarray, batch: tuple[int, ...]) -> None:
+        """Keep the state a step returned (and its arrays as the kernel takes them) for the next step's fast path."""
+        self.last, self.x, self.P = state, x, P
+        if batch != self.batch:
+            self.batch = batch
+            self.zshape = batch + (self.m,)
+            self.bx, self.bP = batch + (self.n,), batch + self.nn
+        # the fast path steps with the model's own dt: only once its packed model is known (and applies)
+        self.packed = self.models.get(None)
+        self.chained = None if self.packed is None else state
 
     def gated(self, out: np.ndarray, x_new: np.ndarray, P_new: np.ndarray):
         """The χ² gate of the batched step (:func:`pursuit.filters.gating.apply_gate`) on one run."""
@@ -292,7 +349,7 @@ def online_lane(filt, specs, kind: str) -> Callable | None:
         return _Lane(filt, specs, n, generated.linear_kf_kernels(F, Q, A, R).one, pack)
     sensor = hs.kernel_args(1)
     if kind == "ekf":
-        return _Lane(filt, specs, n, GK.ekf_one, lambda F, Q: (Prediction(F, Q, lam), sensor))
+        return _Lane(filt, specs, n, OS.ekf_one_scalar, lambda F, Q: (Prediction(F, Q, lam), sensor))
     cscale, wm, wc = filt.sigma_weights(n)
     sigma = SigmaPoints(float(cscale), np.ascontiguousarray(wm), np.ascontiguousarray(wc), wm.shape[0] % 2 == 1)
-    return _Lane(filt, specs, n, GK.sigma_one, lambda F, Q: (Prediction(F, Q, lam), sensor, sigma))
+    return _Lane(filt, specs, n, OS.sigma_one_scalar, lambda F, Q: (Prediction(F, Q, lam), sensor, sigma))

@@ -374,7 +374,8 @@ class _GaussianFilter(FilterBase):
             the motion model's own ``dt``).
         """
         if self._specs is not None:  # compiled: one run first tries the online lane, which validates by itself
-            fast = self._online_step(state, z, k, dt)
+            lane = self.__dict__.get("_online_lane")  # made by _online_step's first call; a call saved per step
+            fast = lane(state, z, k, dt) if lane is not None else self._online_step(state, z, k, dt)
             if fast is not None:
                 return fast
         k = state.k + 1 if k is None else int(k)
