@@ -342,7 +342,14 @@ def test_the_one_run_covariance_is_symmetric_to_the_bit(kind):
         assert np.array_equal(state.cov, state.cov.T)
 
 
-@pytest.mark.parametrize("kind,sensor", [("KF", "position"), ("EKF", "range-bearing"), ("EKF", "range"), ("UKF", "toa"), ("CKF", "range")])
+_SLOW = pytest.mark.slow  # several seconds each: the sigma-point and range cases run with make test-slow
+
+
+@pytest.mark.parametrize(
+    "kind,sensor",
+    [("KF", "position"), ("EKF", "range-bearing"), pytest.param("EKF", "range", marks=_SLOW),
+     pytest.param("UKF", "toa", marks=_SLOW), pytest.param("CKF", "range", marks=_SLOW)],
+)
 def test_one_run_steps_after_long_gaps_stay_positive_definite_under_last_bit_perturbations(kind, sensor):
     """test_perturbation's gaps scenario (500 s gaps, 1 mm sensors, 20 % missing) stepped one run at a time (batch ())."""
     from .test_perturbation import perturbed_batch, scenario
