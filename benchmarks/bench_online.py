@@ -29,6 +29,7 @@ Run::
 
     PYTHONPATH=src taskset -c 1 .bench-venv/bin/python benchmarks/bench_online.py
     PYTHONPATH=src taskset -c 1 .bench-venv/bin/python benchmarks/bench_online.py --ab   # one-run path vs general step
+    PYTHONPATH=src taskset -c 1 .bench-venv/bin/python benchmarks/bench_online.py --kinds kf,ekf --no-numba
     .bench-venv/bin/python benchmarks/run.py --only online
 """
 
@@ -38,6 +39,7 @@ import _one_core  # first: NumPy's BLAS on one thread (benchmarks/ is on sys.pat
 
 _one_core.pin()
 
+import argparse  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
@@ -67,19 +69,25 @@ Row = tuple[str, str, float, float | None]  # (name, backend, µs per step, peer
 Maker = Callable[[], Callable[[], object]]  # builds a fresh pass (not timed); the pass is timed
 
 
+CLOCK: Callable[[], float] = time.perf_counter
+"""The clock of every pass: wall clock, or ``time.process_time`` (CPU time of this process) with ``--cpu``."""
+
+
 def interleaved_us(passes: dict[str, tuple[Maker, int]], repeats: int = REPEATS) -> dict[str, float]:
     """Median µs per step of each pass, the passes taking turns in every round.
 
     Taking turns keeps a ratio fair on a shared machine whose load drifts
     during the run.  ``passes`` maps a name to ``(make, steps of one pass)``.
+    The clock is :data:`CLOCK`: CPU time leaves out the time other
+    processes held the core (a pass of 2000 steps spans many scheduler slices).
     """
     times: dict[str, list[float]] = {name: [] for name in passes}
     for _ in range(repeats):
         for name, (make, steps) in passes.items():
             go = make()
-            t0 = time.perf_counter()
+            t0 = CLOCK()
             go()
-            times[name].append((time.perf_counter() - t0) / steps * 1e6)
+            times[name].append((CLOCK() - t0) / steps * 1e6)
     return {name: statistics.median(ts) for name, ts in times.items()}
 
 
@@ -315,7 +323,8 @@ def _particles_pass(steps: int) -> tuple[Maker, int] | None:
 
 # -- the table ----------------------------------------------------------------------
 def rows(
-    backend: str = "numpy", steps: int = STEPS, repeats: int = REPEATS, peers: dict[str, float | None] | None = None
+    backend: str = "numpy", steps: int = STEPS, repeats: int = REPEATS, peers: dict[str, float | None] | None = None,
+    kinds: tuple[str, ...] = KINDS,
 ) -> list[Row]:
     """``(name, backend, µs per step, peer µs / row µs)`` of pursuit computing with ``backend``, every kind.
 
@@ -324,7 +333,7 @@ def rows(
     ``peers`` (kind → µs, None when not installed) when a dict is given.
     """
     out: list[Row] = []
-    for kind in KINDS:
+    for kind in kinds:
         passes = pursuit_passes(kind, backend, steps)
         peer = peer_pass(kind, steps)
         if peer is not None:
@@ -344,7 +353,7 @@ def table(all_rows: list[Row]) -> str:
     return "\n".join(lines)
 
 
-def ab_rows(steps: int = 500, repeats: int = 5) -> list[Row]:
+def ab_rows(steps: int = 500, repeats: int = 5, kinds: tuple[str, ...] = ("kf", "ekf", "ukf")) -> list[Row]:
     """The one-run path of the Gaussian filters against their general step, with the same filters (``--ab``).
 
     The general-step rows switch the one-run path off (the private
@@ -370,7 +379,7 @@ def ab_rows(steps: int = 500, repeats: int = 5) -> list[Row]:
         return make_general
 
     out: list[Row] = []
-    for kind in ("kf", "ekf", "ukf"):
+    for kind in kinds:
         passes: dict[str, tuple[Maker, int]] = {}
         for name, (make, n) in pursuit_passes(kind, "numpy", steps).items():
             passes[f"{name}, one-run path"] = (make, n)
@@ -380,32 +389,50 @@ def ab_rows(steps: int = 500, repeats: int = 5) -> list[Row]:
             passes[PEER_LABELS[kind]] = peer
         us = interleaved_us(passes, repeats)
         ref = us.get(PEER_LABELS[kind])
-        out += [(name, backend if name.startswith("pursuit") else "peer", v, ref / v if ref else None) for name, v in us.items()]
+        out += [(name, "numpy" if name.startswith("pursuit") else "peer", v, ref / v if ref else None) for name, v in us.items()]
     return out
 
 
-def main(quick: bool = False) -> list[Row]:
-    steps, repeats = (200, 3) if quick else (STEPS, REPEATS)
+def main(quick: bool = False, kinds: tuple[str, ...] = KINDS, numba: bool = True, repeats: int | None = None) -> list[Row]:
+    steps, repeats = (200, 3) if quick else (STEPS, repeats or REPEATS)
     peers: dict[str, float | None] = {}
-    mine = rows("numpy", steps, repeats, peers)
+    mine = rows("numpy", steps, repeats, peers, kinds)
     all_rows: list[Row] = [
         (PEER_LABELS[kind], "peer", us, 1.0) if us is not None else (PEER_LABELS[kind], "not installed", float("nan"), None)
         for kind, us in peers.items()
     ]
     all_rows += mine
-    if numba_available():
+    if numba and numba_available():
         # the compiled step, timed against the same peers in turn (its floor: benchmarks/_online_compiled.py)
-        all_rows += [r for r in rows("numba", steps, repeats) if r[1] != "peer"]
+        all_rows += [r for r in rows("numba", steps, repeats, kinds=kinds) if r[1] != "peer"]
+    clock = "CPU time" if CLOCK is time.process_time else "wall clock"
     print(
-        f"One run, {steps} steps (PF: {pf_steps(steps)}), N = {PARTICLES} particles; median of {repeats} passes, "
+        f"One run, {steps} steps (PF: {pf_steps(steps)}), N = {PARTICLES} particles; median of {repeats} passes ({clock}), "
         "each pursuit pass taking turns with its peer's; one core.\n"
     )
     print(table(all_rows))
     return all_rows
 
 
+def _parse(argv: list[str]) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description="One run at a time: pursuit's step against FilterPy and particles.")
+    p.add_argument("--ab", action="store_true", help="the one-run path against the general step (NumPy)")
+    p.add_argument("--quick", action="store_true", help="200 steps, 3 passes")
+    p.add_argument("--kinds", default=None, help=f"comma-separated subset of {','.join(KINDS)} (default: all; --ab: kf,ekf,ukf)")
+    p.add_argument("--no-numba", action="store_true", help="NumPy rows only")
+    p.add_argument("--cpu", action="store_true", help="time by CPU time (time.process_time), not wall clock")
+    p.add_argument("--repeats", type=int, default=None, help=f"passes per row (default {REPEATS}; --ab: 5); the median is reported")
+    return p.parse_args(argv)
+
+
 if __name__ == "__main__":
-    if "--ab" in sys.argv:
-        print(table(ab_rows()))
+    args = _parse(sys.argv[1:])
+    if args.cpu:
+        CLOCK = time.process_time
+    chosen = None if args.kinds is None else tuple(k.strip() for k in args.kinds.split(","))
+    if chosen is not None and not set(chosen) <= set(KINDS):
+        raise SystemExit(f"--kinds: expected a subset of {', '.join(KINDS)}, got {args.kinds!r}")
+    if args.ab:
+        print(table(ab_rows(repeats=args.repeats or 5, kinds=tuple(k for k in (chosen or ("kf", "ekf", "ukf")) if k != "pf"))))
     else:
-        main(quick="--quick" in sys.argv)
+        main(quick=args.quick, kinds=chosen or KINDS, numba=not args.no_numba, repeats=args.repeats)

@@ -32,6 +32,7 @@ __all__ = [
     "numerical_jacobian",
     "is_shared",
     "small_inv_logdet",
+    "small_inv_det",
     "small_cholesky",
 ]
 
@@ -355,6 +356,45 @@ def small_inv_logdet(S: np.ndarray) -> tuple[np.ndarray, float] | None:
         return None
     # np.log, not math.log: the bits of logdet_spd (NumPy's SIMD log may differ from libm's in the last bit)
     return np.array(inv).reshape(S.shape), float(np.log(det_log if m == 3 else det))
+
+
+def small_inv_det(s: list[float], m: int) -> tuple[list[list[float]], float] | None:
+    """S⁻¹ as rows of Python floats and the determinant of one SPD matrix of size 1 to 3 given as floats, or None.
+
+    ``s`` holds the ``m * m`` entries of S row by row.  The closed forms, their
+    operation order and their hand-over to LAPACK are those of
+    :func:`small_inv_logdet`, so the inverse has the same bits and
+    ``np.log(det)`` is its log det; the one-run step forms S in Python floats
+    and takes the log only when the log-likelihood is asked for.  None where
+    :func:`small_inv_logdet` returns None.
+    """
+    if m == 1:
+        a = s[0]
+        if not a > 0.0:
+            return None
+        return [[1.0 / a]], a
+    if m == 2:
+        a, b, c, d = s
+        det = a * d - b * c
+        if not det > _CLOSED_FORM_MIN_RATIO * (a * d):
+            return None
+        return [[d / det, -b / det], [-c / det, a / det]], det
+    if m != 3:
+        return None
+    a00, a01, a02, a10, a11, a12, a20, a21, a22 = s
+    c00 = a11 * a22 - a12 * a21
+    c01 = a12 * a20 - a10 * a22
+    c02 = a10 * a21 - a11 * a20
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    scale = _CLOSED_FORM_MIN_RATIO * (a00 * a11 * a22)
+    det_log = a00 * (a11 * a22 - a12 * a21) - a01 * (a10 * a22 - a12 * a20) + a02 * (a10 * a21 - a11 * a20)
+    if not (det > scale and det_log > scale):
+        return None
+    return [
+        [c00 / det, (a02 * a21 - a01 * a22) / det, (a01 * a12 - a02 * a11) / det],
+        [c01 / det, (a00 * a22 - a02 * a20) / det, (a02 * a10 - a00 * a12) / det],
+        [c02 / det, (a01 * a20 - a00 * a21) / det, (a00 * a11 - a01 * a10) / det],
+    ], det_log
 
 
 def small_cholesky(P: np.ndarray) -> np.ndarray | None:

@@ -216,3 +216,213 @@ def test_a_kept_prediction_does_not_share_memory_with_the_info(kind, batch):
         assert bool(np.all(info["gated"])) or np.isnan(z).all()
         np.testing.assert_array_equal(new.mean, info["pred_mean"])
         assert not np.shares_memory(new.mean, info["pred_mean"]) and not np.shares_memory(new.mean, state.mean)
+
+
+# -- the lazy info ------------------------------------------------------------------------------------
+def _steps(filt, count=12, batch=()):
+    """(state, info) of ``count`` one-run steps along :func:`_measurements` (gaps and a partly missing step included)."""
+    zs = _measurements(filt)
+    state = filt.init(pu.Gaussian(X0 + 1.0, np.diag([20.0, 2.0, 20.0, 2.0])), batch=batch)
+    out = []
+    for z in zs[:count]:
+        state, info = filt.step(state, z)
+        out.append((state, info))
+    return out
+
+
+def _eager(info):
+    """The values of ``info`` as a plain dict, each made now (np.array copies: no view of the lazy mapping's arrays)."""
+    return {key: np.array(value) for key, value in dict(info).items()}
+
+
+@pytest.mark.parametrize("kind", ["KF", "EKF", "EKF3", "UKF", "CKF"])
+def test_the_lazy_info_is_a_mapping_with_the_keys_and_order_of_the_general_step(kind):
+    from collections.abc import Mapping
+
+    filt = _filter(kind, gate=0.99)
+    state = filt.init(pu.Gaussian(X0 + 1.0, np.diag([20.0, 2.0, 20.0, 2.0])))
+    z = _measurements(filt)[0]
+    _, info = filt.step(state, z)
+    _, ref = filt.numpy_step(state, z, 1, None)
+    assert isinstance(info, Mapping) and type(info) is not dict  # the lazy mapping: the test below is about it
+    assert list(info) == list(ref) == list(pu.filters.gaussian.INFO_KEYS)
+    assert len(info) == len(ref) and all(key in info for key in ref) and "nope" not in info
+    assert info.get("nope") is None
+    with pytest.raises(KeyError):
+        info["nope"]
+    got = dict(info)
+    assert list(got) == list(ref)
+    for key in ref:
+        _assert_close(got[key], ref[key], key)
+
+
+@pytest.mark.parametrize("kind", ["KF", "EKF", "UKF"])
+def test_each_lazy_value_is_made_once_and_equals_the_eager_one(kind):
+    """Read in any order, each value is one array (the same object on every read), equal to the one-run step's eager values."""
+    filt = _filter(kind)
+    steps = _steps(filt)
+    for order in (list(pu.filters.gaussian.INFO_KEYS), list(reversed(pu.filters.gaussian.INFO_KEYS))):
+        for state, info in _steps(filt):
+            first = {key: info[key] for key in order}
+            assert all(info[key] is first[key] for key in order)
+    # values read after later steps are those of their own step (no buffer shared between steps)
+    late = [_eager(info) for _, info in steps]
+    again = [_eager(info) for _, info in _steps(filt)]
+    for a, b in zip(late, again):
+        for key in a:
+            np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+
+
+def test_the_lazy_values_have_the_dtypes_and_shapes_of_the_general_step():
+    filt = _filter("EKF")
+    state, info = _steps(filt, 3)[-1]
+    assert info["S"].shape == (2, 2) and info["S"].dtype == np.float64 and info["S"].flags.writeable
+    for key in ("nis", "loglik"):
+        assert info[key].shape == () and info[key].dtype == np.float64
+    nu, S = info["innovation"], info["S"]
+    np.testing.assert_allclose(info["nis"], nu @ np.linalg.solve(S, nu), rtol=1e-12)
+    want = -0.5 * (nu @ np.linalg.solve(S, nu) + np.linalg.slogdet(S)[1] + 2 * np.log(2 * np.pi))
+    np.testing.assert_allclose(info["loglik"], want, rtol=1e-12)
+
+
+@pytest.mark.parametrize("kind", ["KF", "UKF"])
+def test_the_lazy_info_pickles_copies_and_prints_as_the_plain_dict(kind):
+    import copy
+    import pickle
+
+    filt = _filter(kind)
+    for _, info in _steps(filt, 10):  # includes the all-missing steps 8 and 9
+        back = pickle.loads(pickle.dumps(info))
+        assert type(back) is dict and list(back) == list(info)
+        for key in info:
+            np.testing.assert_array_equal(back[key], info[key], err_msg=key)
+        assert type(copy.copy(info)) is dict
+        assert repr(info) == repr(dict(info)) and repr(info).startswith("{'innovation': array(")
+
+
+def test_setting_or_deleting_a_key_keeps_every_value_and_the_order():
+    filt = _filter("EKF")
+    (_, a), (_, b) = _steps(filt, 2)
+    want = _eager(a)
+    a["diverged"] = np.array(False)  # what pursuit.run adds
+    assert list(a) == [*pu.filters.gaussian.INFO_KEYS, "diverged"]
+    for key in want:
+        np.testing.assert_array_equal(a[key], want[key], err_msg=key)
+    want_b = _eager(b)
+    del b["cross_cov"]
+    assert list(b) == list(pu.filters.gaussian.INFO_KEYS)[:-1] and len(b) == 11 and "cross_cov" not in b
+    for key in b:
+        np.testing.assert_array_equal(b[key], want_b[key], err_msg=key)
+    b.update(x=1)
+    assert b["x"] == 1 and {**b}["x"] == 1
+
+
+def test_one_run_update_gives_the_values_of_the_lazy_info():
+    """The eager helper that other filters' one-run paths call agrees with the step's info to the bit."""
+    from pursuit.filters.gaussian import _one_run_update
+
+    filt = _filter("EKF")
+    state = _steps(filt, 3)[-1][0]
+    z = _measurements(filt)[3]
+    pred = filt._predict_one(state.mean, state.cov, 4, None)
+    P_pred = pred.propagated + pred.Q
+    meas = filt._measure_one(pred.mean, P_pred, 4)
+    mean, cov, nu, S, nis, loglik = _one_run_update(pred.mean, P_pred, z, meas, filt.measurement, 4)
+    new, info = filt.step(state, z)
+    np.testing.assert_array_equal(mean, new.mean)
+    np.testing.assert_array_equal(cov, new.cov)
+    np.testing.assert_array_equal(S, info["S"])
+    assert nis == float(info["nis"]) and loglik == float(info["loglik"]) and isinstance(nis, float)
+
+
+# -- the covariance: the Joseph form as Gram matrices --------------------------------------------------
+@pytest.mark.parametrize("kind", ["KF", "EKF", "EKF3", "UKF", "CKF"])
+def test_the_one_run_covariance_is_symmetric_to_the_bit(kind):
+    for state, _ in _steps(_filter(kind), 40):
+        assert np.array_equal(state.cov, state.cov.T)
+
+
+_SLOW = pytest.mark.slow  # several seconds each: the sigma-point and range cases run with make test-slow
+
+
+@pytest.mark.parametrize(
+    "kind,sensor",
+    [("KF", "position"), ("EKF", "range-bearing"), pytest.param("EKF", "range", marks=_SLOW),
+     pytest.param("UKF", "toa", marks=_SLOW), pytest.param("CKF", "range", marks=_SLOW)],
+)
+def test_one_run_steps_after_long_gaps_stay_positive_definite_under_last_bit_perturbations(kind, sensor):
+    """test_perturbation's gaps scenario (500 s gaps, 1 mm sensors, 20 % missing) stepped one run at a time (batch ())."""
+    from .test_perturbation import perturbed_batch, scenario
+
+    motion, meas, z, dts, prior = scenario(sensor, gaps=True, runs=2, steps=700, seed=4)[:5]
+    zs, batch_prior = perturbed_batch(z, prior)
+    cls = {"KF": pu.KalmanFilter, "EKF": pu.ExtendedKalmanFilter, "UKF": pu.UnscentedKalmanFilter, "CKF": pu.CubatureKalmanFilter}[kind]
+    filt = cls(motion, meas, backend="numpy")
+    gaps = int(np.sum(dts >= 500.0))
+    assert gaps >= 1
+    for run in range(zs.shape[1]):
+        state = filt.init(pu.Gaussian(batch_prior.mean[run], batch_prior.cov[run]))
+        for i in range(zs.shape[0]):
+            state, info = filt.step(state, zs[i, run], dt=float(dts[i]))
+            assert not bool(info["repaired"]), f"run {run}, step {i + 1}: repaired"
+            assert np.all(np.isfinite(state.mean)) and np.array_equal(state.cov, state.cov.T)
+            np.linalg.cholesky(state.cov)  # LinAlgError where not positive definite
+
+
+# -- cached model matrices -----------------------------------------------------------------------------
+class _Growing(pu.models.ConstantVelocity):
+    """A user's model: Q grows with the step (an override: the one-run step must not cache its matrices)."""
+
+    def cov(self, k=None, dt=None):
+        return super().cov(k, dt) * (1.0 + 0.1 * (k or 0))
+
+
+class _Drifting(LinearGaussian):
+    """A user's sensor whose noise grows with the step, without ``residual`` override and without ``dim``."""
+
+    def cov(self, k=None):
+        return self.R * (1.0 + 0.05 * (k or 0))
+
+
+def test_a_model_whose_matrices_change_with_the_step_is_not_cached():
+    base = LinearGaussian.position(4, (0, 2), 1.0)
+    meas = _Drifting(base.H, base.R)
+    filt = pu.KalmanFilter(_Growing(ndim=2, dt=1.0, q=0.5, noise="continuous"), meas, backend="numpy")
+    zs = _measurements(_filter("KF"))
+    state = filt.init(pu.Gaussian(X0, np.diag([20.0, 2.0, 20.0, 2.0])))
+    for z in zs[:20]:
+        state, _ = _compare(filt, state, z, None, ())
+    assert filt.__dict__.get("_one_run_motion") is False and "_one_run_noise" not in filt.__dict__
+
+
+def test_built_in_models_are_read_once_per_dt():
+    filt = _filter("KF")
+    state = filt.init(pu.Gaussian(X0, np.eye(4)))
+    for dt in (None, 0.5, None, 0.5, 2.0):
+        state, _ = _compare(filt, state, np.array([-120.0, 4.0]), dt, ())
+    assert set(filt.__dict__["_one_run_motion"]) == {None, 0.5, 2.0}
+    R, C, r = filt.__dict__["_one_run_noise"]
+    assert R is filt.measurement.R and r == R.ravel().tolist()
+    np.testing.assert_allclose(C @ C.T, R, rtol=1e-15)
+
+
+def test_a_sensor_without_dim_or_residual_takes_the_one_run_path():
+    class Plain:
+        """A bare user sensor: h, jacobian, cov only."""
+
+        H = LinearGaussian.position(4, (0, 2), 1.0).H
+
+        def h(self, x, k=None):
+            return x[..., [0, 2]]
+
+        def jacobian(self, x, k=None):
+            return self.H
+
+        def cov(self, k=None):
+            return np.diag([1.0, 2.0])
+
+    filt = pu.ExtendedKalmanFilter(_motion(), Plain(), backend="numpy")
+    state = filt.init(pu.Gaussian(X0, np.eye(4)))
+    for z in _measurements(_filter("KF"))[:12]:
+        state, info = _compare(filt, state, z, None, ())
+    assert type(info) is not dict  # the lazy info of the one-run step

@@ -66,15 +66,19 @@ predicted mean and covariance unchanged.
 
 from __future__ import annotations
 
+from collections.abc import MutableMapping
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Any, ClassVar, NamedTuple, Sequence
+from typing import Any, ClassVar, Iterator, NamedTuple, Sequence
 
 import numpy as np
 
-from .._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, mv, quad, small_cholesky, small_inv_logdet, symmetrize
+from .._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, mv, quad, small_cholesky, small_inv_det, small_inv_logdet, symmetrize
 from .._validation import MAX_MEASUREMENT, in_range, measurement_for_step, model_dim, nonnegative, prior_of_size, time_step
 from ..gaussian import Gaussian
+from ..models.linear_motion import LinearMotion
+from ..models.measurement import LinearGaussian, _GaussianNoise
+from ..models.motion import _Kinematic
 from ..rng import RNGLike
 from .base import FilterBase, as_gaussian, prior_batch
 from .fading import Constant, FadingContext, FadingStrategy, NoFading
@@ -358,7 +362,7 @@ class _GaussianFilter(FilterBase):
 
     def step(
         self, state: GaussianState, z: np.ndarray, k: int | None = None, dt: float | None = None
-    ) -> tuple[GaussianState, dict[str, np.ndarray]]:
+    ) -> tuple[GaussianState, MutableMapping[str, np.ndarray]]:
         """One predict-fade-update cycle with measurement ``z`` (``(*batch, m)``).
 
         Parameters
@@ -372,6 +376,14 @@ class _GaussianFilter(FilterBase):
         dt
             Time since the previous step, for irregular sampling (default:
             the motion model's own ``dt``).
+
+        Returns
+        -------
+        state, info
+            ``info`` maps the keys of the module docstring to arrays: a
+            ``dict``, or for one run without a batch axis a mutable mapping
+            that makes ``S``, ``nis`` and ``loglik`` when first read (the
+            compiled online lane's too).
         """
         if self._specs is not None:  # compiled: one run first tries the online lane, which validates by itself
             lane = self.__dict__.get("_online_lane")  # made by _online_step's first call; a call saved per step
@@ -379,8 +391,9 @@ class _GaussianFilter(FilterBase):
             if fast is not None:
                 return fast
         k = state.k + 1 if k is None else int(k)
-        dt = time_step(dt, k)
-        batch = state.batch
+        if dt is not None:
+            dt = time_step(dt, k)
+        batch = state.mean.shape[:-1]
         complete = _checked_measurement(z, batch, self.measurement)  # the cheap check of one run, else the full one
         if not complete:
             z = measurement_for_step(z, batch, self._measurement_dim(), k)
@@ -397,7 +410,7 @@ class _GaussianFilter(FilterBase):
 
     def _one_run_step(
         self, state: GaussianState, z: np.ndarray, k: int, dt: float | None, complete: bool = False
-    ) -> tuple[GaussianState, dict[str, np.ndarray]] | None:
+    ) -> tuple[GaussianState, MutableMapping[str, np.ndarray]] | None:
         """:meth:`numpy_step` for one run without a batch axis (batch ``()``) and a constant fading factor, or None.
 
         The maths of the general step on plain 2-D arrays: ``ndarray.dot``
@@ -406,13 +419,16 @@ class _GaussianFilter(FilterBase):
         in Python floats, LAPACK's Cholesky called directly.  It agrees with
         :meth:`numpy_step` to round-off (not bit for bit: which is why a batch
         ``(1,)`` takes the general step), with the same info keys, shapes and
-        dtypes.  None where the general step must decide: some but not all
+        dtypes; the info is a :class:`_OneRunInfo` that makes ``S``, ``nis``
+        and ``loglik`` when first read.  The matrices of a built-in
+        time-invariant model are read once per filter (and ``dt``), not per
+        step.  None where the general step must decide: some but not all
         components of ``z`` missing, a covariance that needs a repair, a
         model that returns batched matrices for one state; the caller then
         runs :meth:`numpy_step`.  ``complete``: ``z`` is known to have no
         missing component.
         """
-        x, P, z1 = state.mean, state.cov, z
+        x, P = state.mean, state.cov
         lam = self.fading.lam
         pred = self._predict_one(x, P, k, dt)
         if pred is None:
@@ -421,37 +437,93 @@ class _GaussianFilter(FilterBase):
         meas = self._measure_one(pred.mean, P_pred, k)
         if meas is None:
             return None
-        m = z1.shape[0]
-        missing = 0 if complete else int(np.isnan(z1).sum())
+        m = z.shape[0]
+        missing = 0 if complete else int(np.isnan(z).sum())
         if not missing:
-            out = _one_run_update(pred.mean, P_pred, z1, meas, self.measurement, k)
-            if out is None:
-                return None
-            mean, cov, nu, S, nis, loglik = out
-            dof = m
-            gated = self.gate is not None and nis > chi2_gate_thresholds(self.gate, m)[m]
+            noise = self._noise_one(k)
+            if noise is None or len(noise[2]) != m * m or meas.zp.shape != (m,):
+                return None  # a batched R, or a model inconsistent with z: the general step decides (and raises)
+            plain = getattr(type(self.measurement), "residual", None) is _GaussianNoise.residual  # z − ẑ, no call
+            measurement = None if plain else self.measurement
+            mean, cov, moments = _one_run_moments(pred.mean, P_pred, z, meas, measurement, *noise)
+            gated = self.gate is not None and moments.nis() > chi2_gate_thresholds(self.gate, m)[m]
             if gated:  # the prediction, the info describing the rejected measurement (as apply_gate)
                 mean, cov = pred.mean.copy(), _sym(P_pred)  # a copy: the state must not share info's pred_mean
+            dof, fading, faded, repaired = _constants(m, lam)
+            info = _OneRunInfo({
+                "innovation": moments.nu,
+                "dof": dof,
+                "fading": fading,
+                "faded": faded,
+                "repaired": repaired,
+                "gated": _TRUE if gated else _FALSE,
+                "pred_mean": pred.mean,
+                "pred_cov": P_pred,
+                "cross_cov": pred.cross,
+            }, moments)
         elif missing == m:  # predict only: zero gain, unit variance for every missing component
-            mean, cov, gated = pred.mean.copy(), _sym(P_pred), False
-            nu, S, nis, dof, loglik = np.array([np.nan] * m), _eye(m).copy(), np.nan, 0, 0.0
+            mean, cov = pred.mean.copy(), _sym(P_pred)
+            info = _OneRunInfo({
+                "innovation": np.array([np.nan] * m),
+                "S": _eye(m).copy(),
+                "nis": np.array(np.nan),
+                "dof": _constant(0),
+                "loglik": np.array(0.0),
+                "fading": _constant(float(lam)),
+                "faded": _constant(lam > 1.0),
+                "repaired": _constant(False),
+                "gated": _constant(False),
+                "pred_mean": pred.mean,
+                "pred_cov": P_pred,
+                "cross_cov": pred.cross,
+            }, None)
         else:
             return None
-        info = {
-            "innovation": nu,
-            "S": S,
-            "nis": np.array(nis),
-            "dof": _constant(dof),
-            "loglik": np.array(loglik),
-            "fading": _constant(float(lam)),
-            "faded": _constant(lam > 1.0),
-            "repaired": _constant(False),
-            "gated": _constant(bool(gated)),
-            "pred_mean": pred.mean,
-            "pred_cov": P_pred,
-            "cross_cov": pred.cross,
-        }
-        return GaussianState(mean=mean, cov=cov, k=k, memory=state.memory), info
+        # GaussianState is a frozen dataclass without __post_init__: filling its __dict__ is what __init__ does, cheaper
+        new = object.__new__(GaussianState)
+        new.__dict__.update(mean=mean, cov=cov, k=k, memory=state.memory)
+        return new, info
+
+    def _motion_one(self, k: int, dt: float | None) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(F, Q)`` at ``dt`` of a built-in time-invariant linear motion model, made once per ``dt``; None for other models.
+
+        Those models' F and Q depend on ``dt`` alone (not on ``k`` or ``x``)
+        and are read-only, so the one-run step reads them from this cache
+        instead of calling the model twice per step.
+        """
+        cache = self.__dict__.get("_one_run_motion")
+        if cache is None:
+            cache = {} if _time_invariant_linear(self.motion) else False
+            object.__setattr__(self, "_one_run_motion", cache)  # per filter: not a field
+        if cache is False:
+            return None
+        got = cache.get(dt)
+        if got is None:
+            F = np.asarray(call_with_dt(self.motion.transition_matrix, k, dt=dt), dtype=float)
+            Q = np.asarray(call_with_dt(self.motion.cov, k, dt=dt), dtype=float)
+            if F.ndim != 2 or Q.ndim != 2:
+                return None
+            if len(cache) >= _MAX_DT_CACHE:
+                cache.clear()
+            got = cache[dt] = (F, Q)
+        return got
+
+    def _noise_one(self, k: int) -> tuple[np.ndarray, np.ndarray | None, list[float]] | None:
+        """``(R, C, r)`` of step ``k``: R ``(m, m)``, its Cholesky factor C (None where R does not factor) and its entries as floats.
+
+        Made once for a built-in measurement model (R fixed and read-only at
+        construction), per step for any other; None for a batched R.
+        """
+        noise = self.__dict__.get("_one_run_noise")
+        if noise is not None:
+            return noise
+        R = np.asarray(self.measurement.cov(k), dtype=float)
+        if R.ndim != 2:
+            return None
+        noise = (R, small_cholesky(R), R.ravel().tolist())
+        if _fixed_noise(self.measurement):
+            object.__setattr__(self, "_one_run_noise", noise)  # per filter: not a field
+        return noise
 
     # The one-run hooks: _predict and _measure for x (n,), P (n, n), on 2-D arrays; None: use the general step.
     def _predict_one(self, x: np.ndarray, P: np.ndarray, k: int, dt: float | None) -> _OnePrediction | None:
@@ -621,6 +693,7 @@ def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k):
 
 
 _ONE_RUN = ((), (1,))  # batches of one run: their measurement gets the cheap check
+_F64 = np.dtype(np.float64)
 
 
 def _checked_measurement(z: Any, batch: tuple[int, ...], measurement: Any) -> bool:
@@ -631,12 +704,16 @@ def _checked_measurement(z: Any, batch: tuple[int, ...], measurement: Any) -> bo
     :func:`measurement_for_step`, which raises the errors.  True means no
     component is missing.
     """
-    if batch not in _ONE_RUN or type(z) is not np.ndarray or z.dtype != np.float64 or z.shape[:-1] != batch:
+    if batch not in _ONE_RUN or type(z) is not np.ndarray or z.shape[:-1] != batch:
         return False
-    m = model_dim(measurement)
+    if z.dtype is not _F64 and z.dtype != _F64:  # identity first: a dtype comparison costs more than this whole check
+        return False
+    m = getattr(measurement, "dim", None)
+    if type(m) is not int:  # what model_dim accepts, the common case first
+        m = model_dim(measurement)
     if m is None or z.shape[-1] != m:
         return False
-    values = z.ravel().tolist()
+    values = z.tolist() if z.ndim == 1 else z.ravel().tolist()
     total = sum(values)
     return total - total == 0.0 and max(map(abs, values)) <= MAX_MEASUREMENT  # the first is False for NaN or ±inf
 
@@ -647,6 +724,15 @@ def _constant(value: Any) -> np.ndarray:
     out = np.array(value)
     out.flags.writeable = False
     return out
+
+
+_TRUE, _FALSE = _constant(True), _constant(False)
+
+
+@lru_cache(maxsize=256)
+def _constants(m: int, lam: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``dof``, ``fading``, ``faded`` and ``repaired`` of a fully measured one-run step: read-only 0-d arrays, made once."""
+    return _constant(m), _constant(float(lam)), _constant(lam > 1.0), _FALSE
 
 
 @lru_cache(maxsize=16)
@@ -677,40 +763,192 @@ def _one_run_update(x_pred, P_pred, z, meas: _OneMeasured, measurement, k):
     """:func:`_update` and :func:`_gain_and_cov` for one run with every component measured, on 2-D arrays.
 
     Returns ``(mean, cov, ν, S, nis, loglik)`` with NIS and the
-    log-likelihood as Python floats, or None for a batched R.
+    log-likelihood as Python floats, or None for a batched R.  The eager form
+    of :func:`_one_run_moments` (which the filters' one-run step calls).
     """
     R = np.asarray(measurement.cov(k), dtype=float)
     if R.ndim != 2:
         return None
-    m = R.shape[0]
-    nu = _residual(measurement, z, meas.zp)
-    S = _sym(meas.Pzz + R)
-    small = small_inv_logdet(S)
-    if small is None:  # m > 3, or a determinant the closed forms cannot trust: LAPACK decides
-        S_inv, logdet = inv_spd(S), float(logdet_spd(S))
+    mean, cov, moments = _one_run_moments(x_pred, P_pred, z, meas, measurement, R, small_cholesky(R), R.ravel().tolist())
+    return mean, cov, moments.nu, moments.value("S"), moments.nis(), moments.loglik()
+
+
+def _one_run_moments(
+    x_pred: np.ndarray, P_pred: np.ndarray, z: np.ndarray, meas: _OneMeasured, measurement: Any,
+    R: np.ndarray, C: np.ndarray | None, r: list[float],
+) -> tuple[np.ndarray, np.ndarray, "_Innovation"]:
+    """The update of one run with every component measured: ``(mean, cov, innovation moments)``.
+
+    ``R (m, m)``, ``C`` its Cholesky factor (None where it does not factor)
+    and ``r`` its entries as Python floats; ``measurement`` gives the
+    ``residual`` (None: the plain difference ``z − ẑ``).  S is formed and inverted in
+    Python floats (the closed forms of :func:`pursuit._linalg.small_inv_det`,
+    LAPACK beyond 3 x 3); NIS and the log-likelihood are left to the
+    returned :class:`_Innovation`, computed when asked for.
+
+    The covariance is the Joseph form of the general step (:func:`_gain_and_cov`),
+    each term a Gram matrix: ``(A L)(A L)ᵀ + (K C)(K C)ᵀ`` for the KF/EKF
+    (``A = I − K H``, ``L`` the factor of P⁻), ``W Wᵀ`` for sigma points.
+    NumPy computes ``X.dot(X.T)`` with BLAS ``syrk`` and mirrors its
+    triangle, so each term, and their sum, is symmetric to the bit and needs
+    no symmetrisation; ``K R Kᵀ`` as a product (where ``R`` does not factor)
+    is not, and is symmetrised as the general step does.
+    """
+    m = len(meas.zp)
+    nu = z - meas.zp if measurement is None else _residual(measurement, z, meas.zp)
+    t = meas.Pzz.ravel().tolist()
+    if m == 2:  # symmetrize(Pzz + R) of the general step, bit for bit: (a + b) * 0.5 per entry
+        a, b, c, d = t[0] + r[0], t[1] + r[1], t[2] + r[2], t[3] + r[3]
+        s = [(a + a) * 0.5, (b + c) * 0.5, (c + b) * 0.5, (d + d) * 0.5]
     else:
-        S_inv, logdet = small
+        t = [u + v for u, v in zip(t, r)]
+        s = [(t[i * m + j] + t[j * m + i]) * 0.5 for i in range(m) for j in range(m)]
+    small = small_inv_det(s, m)
+    if small is None:  # m > 3, or a determinant the closed forms cannot trust: LAPACK decides
+        S = np.array(s).reshape(m, m)
+        S_inv = inv_spd(S)
+        moments = _Innovation(m, nu, s, S_inv.tolist(), None, float(logdet_spd(S)))
+    else:
+        w, det = small
+        S_inv = np.array(w)
+        moments = _Innovation(m, nu, s, w, det, None)
     K = meas.Pxz.dot(S_inv)
+    mean = x_pred + K.dot(nu)
     if meas.L is not None:  # sigma points: the Joseph form through the points' factor (see _gain_and_cov)
         AL = meas.L - K.dot(meas.G.T)
-        C = small_cholesky(R) if meas.E is not None else None
-        if C is not None:  # the Gram matrix of _joseph_gram
+        if C is not None and meas.E is not None:  # the Gram matrix of _joseph_gram
             W = np.concatenate([AL, K.dot(C), K.dot(meas.E.T)], axis=1)
-            cov = W.dot(W.T)
-        else:
-            cov = AL.dot(AL.T) + K.dot(R + meas.D).dot(K.T)
-    else:  # KF/EKF: A P⁻ Aᵀ as the Gram matrix of P⁻'s factor (see _sandwich)
-        A = _eye(P_pred.shape[0]) - K.dot(meas.H)
-        L = small_cholesky(P_pred)
-        if L is None:
-            cov = A.dot(P_pred).dot(A.T)
-        else:
-            AL = A.dot(L)
-            cov = AL.dot(AL.T)
-        cov = cov + K.dot(R).dot(K.T)
-    v, w = nu.tolist(), S_inv.ravel().tolist()
-    nis = sum([v[i] * w[i * m + j] * v[j] for i in range(m) for j in range(m)])
-    return x_pred + K.dot(nu), _sym(cov), nu, S, nis, -0.5 * (nis + logdet + m * _LOG_2PI)
+            return mean, W.dot(W.T), moments
+        return mean, _sym(AL.dot(AL.T) + K.dot(R + meas.D).dot(K.T)), moments
+    # KF/EKF: A P⁻ Aᵀ as the Gram matrix of P⁻'s factor (see _sandwich)
+    A = _eye(P_pred.shape[0]) - K.dot(meas.H)
+    L = small_cholesky(P_pred)
+    if L is not None and C is not None:
+        AL, KC = A.dot(L), K.dot(C)
+        return mean, AL.dot(AL.T) + KC.dot(KC.T), moments
+    if L is None:
+        cov = A.dot(P_pred).dot(A.T)
+    else:
+        AL = A.dot(L)
+        cov = AL.dot(AL.T)
+    return mean, _sym(cov + K.dot(R).dot(K.T)), moments
+
+
+class _Innovation:
+    """S, NIS and the log-likelihood of one fully measured update, from Python floats, each made when first asked for."""
+
+    __slots__ = ("m", "nu", "s", "w", "det", "logdet", "_nis")
+
+    def __init__(self, m: int, nu: np.ndarray, s: list[float], w: list[list[float]], det: float | None, logdet: float | None):
+        self.m, self.nu, self.s, self.w = m, nu, s, w  # s: S row by row; w: the rows of S⁻¹
+        self.det, self.logdet = det, logdet  # log det S is np.log(det) where logdet is None
+        self._nis: float | None = None
+
+    def nis(self) -> float:
+        """νᵀ S⁻¹ ν."""
+        nis = self._nis
+        if nis is None:
+            v, w, m = self.nu.tolist(), self.w, self.m
+            nis = self._nis = sum([v[i] * w[i][j] * v[j] for i in range(m) for j in range(m)])
+        return nis
+
+    def loglik(self) -> float:
+        """log N(ν; 0, S)."""
+        logdet = self.logdet
+        if logdet is None:
+            # np.log, not math.log: the bits of logdet_spd (NumPy's SIMD log may differ from libm's in the last bit)
+            logdet = self.logdet = float(np.log(self.det))
+        return -0.5 * (self.nis() + logdet + self.m * _LOG_2PI)
+
+    def value(self, key: str) -> np.ndarray:
+        """The info value ``S``, ``nis`` or ``loglik``, as the general step's (fresh float64 arrays)."""
+        if key == "S":
+            return np.array(self.s).reshape(self.m, self.m)
+        if key == "nis":
+            return np.array(self.nis())
+        if key == "loglik":
+            return np.array(self.loglik())
+        raise KeyError(key)
+
+
+INFO_KEYS = ("innovation", "S", "nis", "dof", "loglik", "fading", "faded", "repaired", "gated", "pred_mean", "pred_cov", "cross_cov")
+"""The info keys of every Gaussian filter's step, in order."""
+
+_LAZY_KEYS = frozenset({"S", "nis", "loglik"})
+
+
+class _OneRunInfo(MutableMapping):
+    """The info of a one-run step: :meth:`_GaussianFilter.numpy_step`'s keys and values, ``S``, ``nis`` and ``loglik`` made on first access.
+
+    A fully measured step of one run costs a few microseconds more when its
+    info is built eagerly (three arrays, NIS and a logarithm) than its
+    filter arithmetic can spare; most callers read one key or none.  Each
+    value is made once and returned again (the same array), with the shape,
+    dtype and value the eager dict had.  Setting or deleting a key first
+    makes every value, after which it is an ordinary mapping.  It iterates
+    in the general step's key order, prints and pickles as that step's plain
+    ``dict`` (``pickle`` and ``copy`` give a ``dict``).
+    """
+
+    __slots__ = ("_values", "_moments")
+
+    def __init__(self, values: dict[str, Any], moments: _Innovation | None):
+        self._values = values  # every key but those moments makes (all of them when moments is None)
+        self._moments = moments
+
+    def __getitem__(self, key: str) -> Any:
+        try:
+            return self._values[key]
+        except KeyError:
+            if self._moments is None or key not in _LAZY_KEYS:
+                raise
+        value = self._values[key] = self._moments.value(key)
+        return value
+
+    def _resolve(self) -> dict[str, Any]:
+        if self._moments is not None:
+            self._values = {key: self[key] for key in INFO_KEYS}
+            self._moments = None
+        return self._values
+
+    def __setitem__(self, key: str, value: Any) -> None:
+        self._resolve()[key] = value
+
+    def __delitem__(self, key: str) -> None:
+        del self._resolve()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(INFO_KEYS) if self._moments is not None else iter(self._values)
+
+    def __len__(self) -> int:
+        return len(INFO_KEYS) if self._moments is not None else len(self._values)
+
+    def __contains__(self, key: object) -> bool:
+        return key in INFO_KEYS if self._moments is not None else key in self._values
+
+    def __repr__(self) -> str:
+        return repr(dict(self))
+
+    def __reduce__(self):
+        return (dict, (dict(self),))
+
+
+_MAX_DT_CACHE = 64  # distinct dt values whose (F, Q) a filter keeps for its one-run step
+
+
+def _time_invariant_linear(motion: Any) -> bool:
+    """Whether F and Q of ``motion`` depend on ``dt`` alone and ``f`` and ``jacobian`` are F: the built-in linear models."""
+    base = _Kinematic if isinstance(motion, _Kinematic) else LinearMotion if isinstance(motion, LinearMotion) else None
+    if base is None:
+        return False
+    names = ("f", "jacobian", "transition_matrix", "cov", "_matrices") if base is _Kinematic else ("f", "jacobian", "transition_matrix", "cov")
+    t = type(motion)
+    return all(getattr(t, name) is getattr(base, name) for name in names)  # a subclass overriding one is a user's model
+
+
+def _fixed_noise(measurement: Any) -> bool:
+    """Whether ``measurement.cov(k)`` is the read-only R fixed at construction (the built-in models' ``cov``)."""
+    return isinstance(measurement, _GaussianNoise) and type(measurement).cov is _GaussianNoise.cov
 
 
 def _gain_and_cov(P_pred, meas: _Measured, R, R_eff, Pzz, Pxz, H, D):
@@ -855,6 +1093,11 @@ class ExtendedKalmanFilter(_GaussianFilter):
         return _Measured(zp, H @ PHt, PHt, H)
 
     def _predict_one(self, x, P, k, dt):
+        fixed = self._motion_one(k, dt)
+        if fixed is not None:  # a built-in linear model: f(x) = F x
+            F, Q = fixed
+            PFt = P.dot(F.T)
+            return _OnePrediction(F.dot(x), F.dot(PFt), Q, PFt)
         F = motion_jacobian(self.motion, x, k, dt)
         Q = np.asarray(call_with_dt(self.motion.cov, k, dt=dt), dtype=float)
         if F.ndim != 2 or Q.ndim != 2:
@@ -908,15 +1151,23 @@ class KalmanFilter(ExtendedKalmanFilter):
         return _Measured(mv(H, x_pred), H @ PHt, PHt, H)
 
     def _predict_one(self, x, P, k, dt):
-        F = np.asarray(call_with_dt(self.motion.transition_matrix, k, dt=dt), dtype=float)
-        Q = np.asarray(call_with_dt(self.motion.cov, k, dt=dt), dtype=float)
-        if Q.ndim != 2:
-            return None
+        fixed = self._motion_one(k, dt)
+        if fixed is None:
+            F = np.asarray(call_with_dt(self.motion.transition_matrix, k, dt=dt), dtype=float)
+            Q = np.asarray(call_with_dt(self.motion.cov, k, dt=dt), dtype=float)
+            if F.ndim != 2 or Q.ndim != 2:
+                return None
+        else:
+            F, Q = fixed
         PFt = P.dot(F.T)
         return _OnePrediction(F.dot(x), F.dot(PFt), Q, PFt)
 
     def _measure_one(self, x_pred, P_pred, k):
-        H = np.asarray(self.measurement.matrix(k), dtype=float)
+        measurement = self.measurement
+        # a built-in LinearGaussian's H is fixed and read-only: no call, no conversion
+        H = measurement.H if type(measurement) is LinearGaussian else np.asarray(measurement.matrix(k), dtype=float)
+        if H.ndim != 2:
+            return None
         PHt = P_pred.dot(H.T)
         return _OneMeasured(H.dot(x_pred), H.dot(PHt), PHt, H)
 
