@@ -76,7 +76,8 @@ def _threads(n: int | None):
     if n is not None:
         import numba
 
-        numba.set_num_threads(n)
+        # under taskset numba's thread count defaults to the cores it may use: at most that many
+        numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
 
 
 def pursuit_rate(kind: str, runs: int, steps: int, backend: str = "numpy", shared: bool = True, threads: int | None = None) -> float:

@@ -21,6 +21,13 @@ NumPy.
 The measurement half of each step (:func:`_ekf_correct`, :func:`_sigma_correct`)
 is also a kernel of its own, :func:`correct_serial` / :func:`correct_parallel`,
 for a filter that forms its prediction itself (the CS-model filter).
+
+The whole-sequence kernels (:func:`_ekf_sequence`, :func:`_sigma_sequence`)
+run every step of a block of runs in one call, the block's state and
+scratch arrays allocated once.  The UKF/CKF step and sequence kernels share
+their block functions (:func:`_sigma_predict_ws`, :func:`_sigma_correct_ws`),
+so the two give the same bits whatever their block sizes: no loop reduces
+across runs.
 """
 
 from __future__ import annotations
@@ -35,9 +42,10 @@ from .kernel_args import GaussOutputs
 from .model_math import h_row, jac_row, wraps
 
 BLOCK = 512
-SEQUENCE_BLOCK = 64
-"""Runs per block of the UKF/CKF whole-sequence kernel: its state and scratch (about 100 kB for n = 4,
-m = 2, 9 points) stay in the core's caches from one step to the next."""
+SEQUENCE_BLOCK = 256
+"""Runs per block of the UKF/CKF whole-sequence kernel: its state and scratch (about 450 kB for n = 4,
+m = 2, 9 points) stay in the core's L2 cache from one step to the next, and each loop over the runs
+is long enough to pay for its set-up (measured: 256 runs 1.4x faster than 16)."""
 _NJ = dict(cache=True, error_model="numpy")
 
 
