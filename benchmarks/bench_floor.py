@@ -211,15 +211,18 @@ def ukf_split(runs: int, steps: int) -> dict[str, float]:
     Returns ns per filter-step (one run, one step) of: the range-bearing
     measurement of the 9 sigma points alone (libm's ``hypot`` and ``atan2``,
     one run at a time, as ``model_math.h_range_bearing``); the sigma step
-    kernel alone (lane-major arrays, no Python between steps); and
-    ``pursuit.run`` (the kernel, the per-step glue, the step info and the
-    divergence checks).
+    kernel alone (lane-major arrays, no Python between steps); the
+    whole-sequence kernel alone (every step of every run in one call, the
+    outputs already allocated); ``pursuit.run`` stepping from Python
+    (``sequence=False``: the step kernel, the per-step glue, the step info)
+    and ``pursuit.run`` as it runs by default (the whole-sequence kernel,
+    the info arrays and the divergence checks).
     """
     import numba
     from bench_kf import ukf_work
 
     from pursuit._compiled import gauss_kernels as GK
-    from pursuit._compiled.kernel_args import Prediction, SigmaPoints
+    from pursuit._compiled.kernel_args import GaussSequenceOutputs, Prediction, SigmaPoints
 
     @numba.njit(error_model="numpy")
     def h_points(X, out):  # 9 points (n, B) per run: range and bearing, as the kernel's h
@@ -238,7 +241,9 @@ def ukf_split(runs: int, steps: int) -> dict[str, float]:
     filt = pu.UnscentedKalmanFilter(motion, meas, backend="numba")
     prior = pu.Gaussian(np.zeros(4), np.eye(4))
     pu.run(filt, zs[:2], prior, keep_cov=False)  # compile
+    pu.run(filt, zs[:2], prior, keep_cov=False, sequence=False)
     whole = _median_time(lambda: pu.run(filt, zs, prior, keep_cov=False), 3) / (runs * steps)
+    stepped = _median_time(lambda: pu.run(filt, zs, prior, keep_cov=False, sequence=False), 3) / (runs * steps)
 
     n, m, F, Q, zl, valid, outs, sensor, x0, P0 = _block_inputs(filt, zs, runs)
     cscale, wm, wc = filt.sigma_weights(n)
@@ -252,12 +257,21 @@ def ukf_split(runs: int, steps: int) -> dict[str, float]:
 
     kernel_only()
     kernel = _median_time(kernel_only, 3) / (runs * steps)
+    seq_outs = GaussSequenceOutputs(np.empty((steps, runs, n)), np.empty((1, 1, 1, 1)), np.empty((steps, runs, m)),
+                                    np.empty((steps, runs, m, m)), np.empty((steps, runs)), np.empty((steps, runs), dtype=np.int64),
+                                    np.empty((steps, runs)), np.ones(runs, dtype=np.bool_))
+
+    def sequence_only():
+        GK.sigma_sequence_serial((x0, P0), (zl, valid), Prediction(F, Q, 1.0), sensor, sigma, False, seq_outs)
+
+    sequence_only()
+    sequence = _median_time(sequence_only, 3) / (runs * steps)
     pts = np.random.default_rng(0).standard_normal((wm.shape[0], n, runs)) * 30.0
     hout = np.empty((m, runs))
     h_points(pts, hout)
     h = _median_time(lambda: h_points(pts, hout), 5) / runs
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
-    return {"h": h * 1e9, "kernel": kernel * 1e9, "run": whole * 1e9}
+    return {"h": h * 1e9, "kernel": kernel * 1e9, "sequence": sequence * 1e9, "stepped": stepped * 1e9, "run": whole * 1e9}
 
 
 def print_ukf_split(quick: bool = False) -> dict[str, float]:
@@ -269,7 +283,9 @@ def print_ukf_split(quick: bool = False) -> dict[str, float]:
     print("|---|---|---|")
     print(f"| range and bearing of the 9 sigma points alone (libm hypot, atan2) | {t['h']:.0f} | {1e3 / t['h']:.2f} |")
     print(f"| sigma step kernel alone (lane-major arrays, no Python between steps) | {t['kernel']:.0f} | {1e3 / t['kernel']:.2f} |")
-    print(f"| `pursuit.run` (kernel, per-step glue, step info, divergence checks) | {t['run']:.0f} | {1e3 / t['run']:.2f} |")
+    print(f"| whole-sequence kernel alone (`gauss_kernels.sigma_sequence_serial`, outputs allocated) | {t['sequence']:.0f} | {1e3 / t['sequence']:.2f} |")
+    print(f"| `pursuit.run(..., sequence=False)` (step kernel, per-step glue, step info, divergence checks) | {t['stepped']:.0f} | {1e3 / t['stepped']:.2f} |")
+    print(f"| `pursuit.run` (whole-sequence kernel, info arrays, divergence checks; the default) | {t['run']:.0f} | {1e3 / t['run']:.2f} |")
     print()
     return t
 

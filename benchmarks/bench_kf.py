@@ -81,7 +81,8 @@ def _threads(n: int | None):
     if n is not None:
         import numba
 
-        numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))  # taskset -c 1: numba has one thread
+        # under taskset numba's thread count defaults to the cores it may use: at most that many
+        numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
 
 
 def pursuit_rate(kind: str, runs: int, steps: int, backend: str = "numpy", shared: bool = True, threads: int | None = None) -> float:
@@ -319,7 +320,40 @@ def main(quick: bool = False) -> dict[str, list[dict]]:
     return {"kf": kf, "ukf": ukf}
 
 
-if __name__ == "__main__":
-    import sys
+def main_ukf(repeat: int = 5) -> dict[str, float]:
+    """The compiled UKF's row alone on one thread, between two FilterPy timings (issue 22, item 2).
 
-    main(quick="--quick" in sys.argv)
+    FilterPy is timed before and after pursuit and the ratio is taken to
+    the mean of its two rates, so a change of load during the run shows as
+    the spread of the two peer figures.
+    """
+    u_runs, u_steps, few = 1000, 200, 10
+    peer1 = filterpy_rate("ukf", few, u_steps)
+    rates = [pursuit_rate("ukf", u_runs, u_steps, "numba", threads=1) for _ in range(repeat)]
+    peer2 = filterpy_rate("ukf", few, u_steps)
+    if peer1 is None or peer2 is None:
+        print("FilterPy is not installed: no ratio.")
+        return {"numba1": float(np.median(rates))}
+    ref = 0.5 * (peer1 + peer2)
+    rate = float(np.median(rates))
+    print(f"**UKF, range-bearing sensor (M = {u_runs}, T = {u_steps}), compiled, one thread, median of {repeat}**\n")
+    print("| implementation | M filter-steps/s | ns per filter-step | vs FilterPy UnscentedKalmanFilter |")
+    print("|---|---|---|---|")
+    print(f"| pursuit UKF numba, 1 thread | {rate / 1e6:.3f} | {1e9 / rate:.0f} | {rate / ref:.0f}x (runs: {', '.join(f'{r / ref:.0f}' for r in rates)}) |")
+    print(f"| FilterPy UnscentedKalmanFilter, before / after | {peer1 / 1e6:.5f} / {peer2 / 1e6:.5f} | "
+          f"{1e9 / peer1:.0f} / {1e9 / peer2:.0f} | 1x |")
+    return {"numba1": rate, "filterpy": (peer1, peer2)}
+
+
+if __name__ == "__main__":
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
+    ap.add_argument("--ukf", action="store_true", help="only the compiled UKF on one thread against FilterPy (timed before and after)")
+    ap.add_argument("--repeat", type=int, default=5, help="with --ukf: the median of this many timings of pursuit")
+    cli = ap.parse_args()
+    if cli.ukf:
+        main_ukf(cli.repeat)
+    else:
+        main(quick=cli.quick)

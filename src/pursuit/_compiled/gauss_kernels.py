@@ -21,6 +21,13 @@ NumPy.
 The measurement half of each step (:func:`_ekf_correct`, :func:`_sigma_correct`)
 is also a kernel of its own, :func:`correct_serial` / :func:`correct_parallel`,
 for a filter that forms its prediction itself (the CS-model filter).
+
+The whole-sequence kernels (:func:`_ekf_sequence`, :func:`_sigma_sequence`)
+run every step of a block of runs in one call, the block's state and
+scratch arrays allocated once.  The UKF/CKF step and sequence kernels share
+their block functions (:func:`_sigma_predict_ws`, :func:`_sigma_correct_ws`),
+so the two give the same bits whatever their block sizes: no loop reduces
+across runs.
 """
 
 from __future__ import annotations
@@ -35,6 +42,10 @@ from .kernel_args import GaussOutputs
 from .model_math import h_row, jac_row, wraps
 
 BLOCK = 512
+SEQUENCE_BLOCK = 256
+"""Runs per block of the UKF/CKF whole-sequence kernel: its state and scratch (about 450 kB for n = 4,
+m = 2, 9 points) stay in the core's L2 cache from one step to the next, and each loop over the runs
+is long enough to pay for its set-up (measured: 256 runs 1.4x faster than 16)."""
 _NJ = dict(cache=True, error_model="numpy")
 
 
@@ -126,10 +137,15 @@ def _symmetrize(P):
 @njit(**_NJ)
 def _chol(P, L, ok):
     """Lower Cholesky factors of P (n, n, B) into L; ok[c] = False where a run's P is not positive definite."""
+    _chol_ws(P, L, ok, np.empty(P.shape[2]))
+
+
+@njit(**_NJ)
+def _chol_ws(P, L, ok, d):
+    """:func:`_chol` with its scratch row ``d (B,)`` given (the whole-sequence kernel allocates it once)."""
     n = P.shape[0]
     B = P.shape[2]
     L[:] = 0.0
-    d = np.empty(B)
     for j in range(n):
         for c in range(B):
             d[c] = P[j, j, c]
@@ -541,44 +557,117 @@ def _points(x, L, cscale, centre, chi):
 
 
 @njit(**_NJ)
+def _sigma_workspace(n, m, npts, B):
+    """Scratch arrays of one block's UKF/CKF step (:func:`_sigma_predict_ws`, :func:`_sigma_correct_ws`).
+
+    ``(d, L, chi, Y, dY, dX, Z, zp, dZ, Pzz, Pxz, GT, E, D, update)``: the
+    Cholesky row scratch, the factor, the points (shared by the two halves:
+    the prediction's points are no longer needed when the update redraws
+    them), their images, and :func:`_update_workspace`'s arrays.
+    """
+    return (np.empty(B), np.empty((n, n, B)), np.empty((npts, n, B)), np.empty((npts, n, B)), np.empty((npts, n, B)),
+            np.empty((npts, n, B)), np.empty((npts, m, B)), np.empty((m, B)), np.empty((npts, m, B)),
+            np.empty((m, m, B)), np.empty((n, m, B)), np.empty((m, n, B)), np.empty((npts, m, B)), np.empty((m, m, B)),
+            _update_workspace(n, m, B))
+
+
+@njit(**_NJ)
+def _sigma_predict_ws(xb, Pb, prediction, sigma, okb, pred, with_cross, ws):
+    """The UKF/CKF's prediction of one block: points of ``(xb, Pb)`` through F, into ``pred = (xp, Pp, cross)``.
+
+    ``cross`` (the smoother's cross-covariance) is written only if
+    ``with_cross``; ``xp`` and ``Pp`` are the same bits either way.
+    """
+    F, Q, lam = prediction
+    cscale, wm, wc, centre = sigma
+    xp, Pp, cross = pred
+    d, L, chi, Y, dY, dX = ws[0], ws[1], ws[2], ws[3], ws[4], ws[5]
+    n, B = xb.shape
+    npts = wm.shape[0]
+    _chol_ws(Pb, L, okb, d)
+    _points(xb, L, cscale, centre, chi)
+    for s in range(npts):
+        _cmv(F, chi[s], Y[s])
+    xp[:] = 0.0
+    for s in range(npts):
+        w = wm[s]
+        for i in range(n):
+            for c in range(B):
+                xp[i, c] += w * Y[s, i, c]
+    for s in range(npts):
+        for i in range(n):
+            for c in range(B):
+                dY[s, i, c] = Y[s, i, c] - xp[i, c]
+    Pp[:] = 0.0
+    for s in range(npts):
+        w = wc[s]
+        for i in range(n):
+            for j in range(n):
+                for c in range(B):
+                    Pp[i, j, c] += dY[s, i, c] * w * dY[s, j, c]
+    if with_cross:
+        for s in range(npts):
+            for i in range(n):
+                for c in range(B):
+                    dX[s, i, c] = chi[s, i, c] - xb[i, c]
+        cross[:] = 0.0
+        for s in range(npts):
+            w = wc[s]
+            for i in range(n):
+                for j in range(n):
+                    for c in range(B):
+                        cross[i, j, c] += dX[s, i, c] * w * dY[s, j, c]
+    _symmetrize(Pp)
+    for i in range(n):
+        for j in range(n):
+            q = Q[i, j]
+            for c in range(B):
+                Pp[i, j, c] = (Pp[i, j, c] if lam == 1.0 else lam * Pp[i, j, c]) + q
+
+
+@njit(**_NJ)
 def _sigma_correct(xp, Pp, zb, vb, sensor, sigma, blk):
     """The UKF/CKF's measurement update of one block: points redrawn from the prediction ``(xp, Pp)``, then :func:`_update` into ``blk``."""
+    n, B = xp.shape
+    _sigma_correct_ws(xp, Pp, zb, vb, sensor, sigma, blk, _sigma_workspace(n, zb.shape[0], sigma.wm.shape[0], B))
+
+
+@njit(**_NJ)
+def _sigma_correct_ws(xp, Pp, zb, vb, sensor, sigma, blk, ws):
+    """:func:`_sigma_correct` with its scratch arrays ``ws`` from :func:`_sigma_workspace`."""
     cscale, wm, wc, centre = sigma
     angle, kind = sensor.angle, sensor.kind
     n, B = xp.shape
     m = zb.shape[0]
     npts = wm.shape[0]
     okb = blk[7]
-    L = np.empty((n, n, B))
-    chi = np.empty((npts, n, B))
+    d, L, chi, Z, zp, dZ, Pzz, Pxz, GT, E, D = ws[0], ws[1], ws[2], ws[6], ws[7], ws[8], ws[9], ws[10], ws[11], ws[12], ws[13]
     # measurement: points redrawn from the prediction
-    _chol(Pp, L, okb)
+    _chol_ws(Pp, L, okb, d)
     _points(xp, L, cscale, centre, chi)
-    Z = np.empty((npts, m, B))
     for s in range(npts):
         _h_block(sensor, chi[s], Z[s])
-    zp = np.zeros((m, B))
+    zp[:] = 0.0
     for s in range(npts):
         w = wm[s]
         for a in range(m):
             for c in range(B):
-                d = Z[s, a, c] - Z[0, a, c]
+                dz = Z[s, a, c] - Z[0, a, c]
                 if wraps(kind, angle, a):
-                    d = wrap(d)
-                zp[a, c] += w * d
+                    dz = wrap(dz)
+                zp[a, c] += w * dz
     for a in range(m):
         for c in range(B):
             zp[a, c] += Z[0, a, c]
-    dZ = np.empty((npts, m, B))
     for s in range(npts):
         for a in range(m):
             for c in range(B):
-                d = Z[s, a, c] - zp[a, c]
+                dz = Z[s, a, c] - zp[a, c]
                 if wraps(kind, angle, a):
-                    d = wrap(d)
-                dZ[s, a, c] = d
-    Pzz = np.zeros((m, m, B))
-    Pxz = np.zeros((n, m, B))
+                    dz = wrap(dz)
+                dZ[s, a, c] = dz
+    Pzz[:] = 0.0
+    Pxz[:] = 0.0
     for s in range(npts):
         w = wc[s]
         for a in range(m):
@@ -591,14 +680,13 @@ def _sigma_correct(xp, Pp, zb, vb, sensor, sigma, blk):
     # statistical linearisation, factored (as the NumPy filter): with χ = x⁻ + L ξ and the unit
     # points ξ = ±cscale e_j, G = Σ wc ξ dZᵀ = L⁻¹ Pxz, and D = Σ wc e eᵀ with e = dZ − Gᵀ ξ
     off = 1 if centre else 0
-    GT = np.zeros((m, n, B))  # (H L) = Gᵀ
+    GT[:] = 0.0  # (H L) = Gᵀ
     for j in range(n):
         wp = wc[off + j] * cscale
         wn = wc[off + n + j] * cscale
         for a in range(m):
             for c in range(B):
                 GT[a, j, c] = wp * dZ[off + j, a, c] - wn * dZ[off + n + j, a, c]
-    E = np.empty((npts, m, B))
     for a in range(m):
         for c in range(B):
             if centre:
@@ -607,14 +695,14 @@ def _sigma_correct(xp, Pp, zb, vb, sensor, sigma, blk):
                 g = cscale * GT[a, j, c]
                 E[off + j, a, c] = dZ[off + j, a, c] - g
                 E[off + n + j, a, c] = dZ[off + n + j, a, c] + g
-    D = np.zeros((m, m, B))
+    D[:] = 0.0
     for s in range(npts):
         w = wc[s]
         for a in range(m):
             for b in range(m):
                 for c in range(B):
                     D[a, b, c] += E[s, a, c] * w * E[s, b, c]
-    _update((xp, Pp, zp, Pzz, Pxz, L, GT, D), (zb, vb), sensor, blk)
+    _update_ws((xp, Pp, zp, Pzz, Pxz, L, GT, D), (zb, vb), sensor, blk, ws[14])
 
 
 def _sigma_step(state, obs, prediction, sensor, sigma, out):
@@ -624,10 +712,8 @@ def _sigma_step(state, obs, prediction, sensor, sigma, out):
     """
     x, P = state
     z, valid = obs
-    F, Q, lam = prediction
     R = sensor.R
-    cscale, wm, wc = sigma.cscale, sigma.wm, sigma.wc
-    centre = sigma.centre
+    wm = sigma.wm
     x_out, P_out, xp_out, Pp_out, cross_out, innov, S_out, nis, dof, loglik, ok = out
     n, M = x.shape
     m = R.shape[0]
@@ -638,46 +724,14 @@ def _sigma_step(state, obs, prediction, sensor, sigma, out):
         B = min(r0 + BLOCK, M) - r0
         xb, Pb, zb, vb = _load(x, P, z, valid, r0, B)
         okb = np.ones(B, dtype=np.bool_)
-        L = np.empty((n, n, B))
-        _chol(Pb, L, okb)
-        chi = np.empty((npts, n, B))
-        _points(xb, L, cscale, centre, chi)
-        Y = np.empty((npts, n, B))
-        for s in range(npts):
-            _cmv(F, chi[s], Y[s])
-        xp = np.zeros((n, B))
-        for s in range(npts):
-            w = wm[s]
-            for i in range(n):
-                for c in range(B):
-                    xp[i, c] += w * Y[s, i, c]
-        dY = np.empty((npts, n, B))
-        dX = np.empty((npts, n, B))
-        for s in range(npts):
-            for i in range(n):
-                for c in range(B):
-                    dY[s, i, c] = Y[s, i, c] - xp[i, c]
-                    dX[s, i, c] = chi[s, i, c] - xb[i, c]
-        Pp = np.zeros((n, n, B))
-        cross = np.zeros((n, n, B))
-        for s in range(npts):
-            w = wc[s]
-            for i in range(n):
-                for j in range(n):
-                    for c in range(B):
-                        Pp[i, j, c] += dY[s, i, c] * w * dY[s, j, c]
-                        cross[i, j, c] += dX[s, i, c] * w * dY[s, j, c]
-        _symmetrize(Pp)
-        for i in range(n):
-            for j in range(n):
-                q = Q[i, j]
-                for c in range(B):
-                    Pp[i, j, c] = (Pp[i, j, c] if lam == 1.0 else lam * Pp[i, j, c]) + q
+        ws = _sigma_workspace(n, m, npts, B)
+        xp, Pp, cross = np.empty((n, B)), np.empty((n, n, B)), np.empty((n, n, B))
+        _sigma_predict_ws(xb, Pb, prediction, sigma, okb, (xp, Pp, cross), True, ws)
         xo, Po = np.empty((n, B)), np.empty((n, n, B))
         inb, Sb = np.empty((m, B)), np.empty((m, m, B))
         nb, lb = np.empty(B), np.empty(B)
         db = np.empty(B, dtype=np.int64)
-        _sigma_correct(xp, Pp, zb, vb, sensor, sigma, (xo, Po, inb, Sb, nb, db, lb, okb))
+        _sigma_correct_ws(xp, Pp, zb, vb, sensor, sigma, (xo, Po, inb, Sb, nb, db, lb, okb), ws)
         _store(xo, x_out, r0)
         _store(Po, P_out, r0)
         _store(xp, xp_out, r0)
@@ -689,6 +743,63 @@ def _sigma_step(state, obs, prediction, sensor, sigma, out):
             nis[r0 + c] = nb[c]
             dof[r0 + c] = db[c]
             loglik[r0 + c] = lb[c]
+            ok[r0 + c] = okb[c]
+
+
+def _sigma_sequence(prior, obs, prediction, sensor, sigma, keep_cov, out):
+    """All K steps of the UKF / CKF for every run, without returning to Python between steps.
+
+    The arithmetic of :func:`_sigma_step` (the same :func:`_sigma_predict_ws`
+    and :func:`_sigma_correct_ws`, so the same bits), step after step, with
+    each block of :data:`SEQUENCE_BLOCK` runs kept in block arrays and every
+    scratch array allocated once per block, not once per step.  Arguments
+    and outputs as :func:`_ekf_sequence`'s, with ``sigma`` a
+    :class:`~.kernel_args.SigmaPoints`; the smoother's cross-covariance is
+    not computed.
+    """
+    x0, P0 = prior
+    zs, valid = obs
+    means, covs, innov, S_out, nis, dof, loglik, ok = out
+    n, M = x0.shape
+    m = sensor.R.shape[0]
+    K = zs.shape[0]
+    npts = sigma.wm.shape[0]
+    nblocks = (M + SEQUENCE_BLOCK - 1) // SEQUENCE_BLOCK
+    for bb in prange(nblocks):
+        r0 = np.int64(bb) * SEQUENCE_BLOCK
+        B = min(r0 + SEQUENCE_BLOCK, M) - r0
+        xb, Pb, zb, vb = _load(x0, P0, zs[0], valid[0], r0, B)
+        xp, Pp, cross = np.empty((n, B)), np.empty((n, n, B)), np.empty((n, n, 1))
+        xo, Po = np.empty((n, B)), np.empty((n, n, B))
+        inb, Sb = np.empty((m, B)), np.empty((m, m, B))
+        nb, lb = np.empty(B), np.empty(B)
+        db = np.empty(B, dtype=np.int64)
+        okb = np.ones(B, dtype=np.bool_)
+        ws = _sigma_workspace(n, m, npts, B)
+        for k in range(K):
+            for a in range(m):
+                for c in range(B):
+                    zb[a, c] = zs[k, a, r0 + c]
+                    vb[a, c] = 1.0 if valid[k, a, r0 + c] else 0.0
+            _sigma_predict_ws(xb, Pb, prediction, sigma, okb, (xp, Pp, cross), False, ws)
+            _sigma_correct_ws(xp, Pp, zb, vb, sensor, sigma, (xo, Po, inb, Sb, nb, db, lb, okb), ws)
+            for c in range(B):
+                r = r0 + c
+                for i in range(n):
+                    means[k, r, i] = xo[i, c]
+                    xb[i, c] = xo[i, c]
+                    for j in range(n):
+                        Pb[i, j, c] = Po[i, j, c]
+                        if keep_cov:
+                            covs[k, r, i, j] = Po[i, j, c]
+                for a in range(m):
+                    innov[k, r, a] = inb[a, c]
+                    for b in range(m):
+                        S_out[k, r, a, b] = Sb[a, b, c]
+                nis[k, r] = nb[c]
+                dof[k, r] = db[c]
+                loglik[k, r] = lb[c]
+        for c in range(B):
             ok[r0 + c] = okb[c]
 
 
@@ -735,6 +846,7 @@ def _correct_only(prediction, obs, sensor, sigma, out):
 ekf_step_serial, ekf_step_parallel = serial_and_parallel(_ekf_step, **_NJ)
 ekf_sequence_serial, ekf_sequence_parallel = serial_and_parallel(_ekf_sequence, **_NJ)
 sigma_step_serial, sigma_step_parallel = serial_and_parallel(_sigma_step, **_NJ)
+sigma_sequence_serial, sigma_sequence_parallel = serial_and_parallel(_sigma_sequence, **_NJ)
 correct_serial, correct_parallel = serial_and_parallel(_correct_only, **_NJ)
 
 

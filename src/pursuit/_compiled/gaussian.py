@@ -99,10 +99,7 @@ def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, 
         if kind == "ekf":
             (GK.ekf_step_parallel if par else GK.ekf_step_serial)(*args, outs)
         else:
-            cscale, wm, wc = filt.sigma_weights(n)
-            centre = wm.shape[0] % 2 == 1
-            sigma = SigmaPoints(float(cscale), np.ascontiguousarray(wm), np.ascontiguousarray(wc), centre)
-            (GK.sigma_step_parallel if par else GK.sigma_step_serial)(*args, sigma, outs)
+            (GK.sigma_step_parallel if par else GK.sigma_step_serial)(*args, _sigma_points(filt, n), outs)
     info = {
         "innovation": innov.T,
         "S": S.transpose(2, 0, 1),
@@ -138,25 +135,35 @@ def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, 
     return GaussianState(mean=new_mean, cov=new_cov, k=k, memory=None), info
 
 
-def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_cov: bool):
-    """All steps of a compiled KF/EKF over ``zs (K, M, m)`` from ``state``, or ``None`` where it does not apply.
+def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_cov: bool, kind: str = "ekf"):
+    """All steps of a compiled KF/EKF (``kind="ekf"``) or UKF/CKF (``kind="sigma"``) over ``zs (K, *batch, m)``.
 
     Applies to a linear motion model whose ``F`` and ``Q`` are the same at
-    every step (the models' own ``dt``), one batch axis and no gate: then
+    every step (the models' own ``dt``), a fixed sensor, one batch axis
+    (the UKF/CKF also an unbatched run, batch ``()``) and no gate: then
     nothing needs Python between steps.  Returns ``(means, covs, info)`` in
     the layout of :func:`pursuit.run`, with the info keys of
-    :func:`gaussian_step` (without the smoother's).  Runs whose covariance
-    needed the NumPy repair at some step are recomputed step by step, alone.
+    :func:`gaussian_step` (without the smoother's), or ``None`` where it
+    does not apply.  Runs whose covariance needed the NumPy repair at some
+    step are recomputed step by step, alone.
     """
     ms, hs = specs
-    if len(state.batch) != 1 or filt.gate is not None or hs.moving:
+    batch = state.batch
+    if filt.gate is not None or hs.moving:
         return None  # a moving observer's sensor is packed per step: the step path
+    if len(batch) != 1 and not (kind == "sigma" and batch == ()):
+        return None
     F, _, _ = ms.arrays(1, None)
     Q = np.ascontiguousarray(ms.cov(1, None))
     F2, _, _ = ms.arrays(2, None)
     if not (np.array_equal(F, F2) and np.array_equal(Q, ms.cov(2, None))):
         return None  # time-varying model: the step path evaluates it per step
-    (M,) = state.batch
+    if batch == ():  # one unbatched run: the kernels' one lane, the results reshaped back
+        one = GaussianState(mean=state.mean.reshape(1, -1), cov=np.reshape(state.cov, (1, *np.shape(state.cov)[-2:])),
+                            k=state.k, memory=None)
+        means, covs, info = gaussian_sequence(filt, specs, one, zs[:, None], keep_cov, kind)
+        return means[:, 0], (None if covs is None else covs[:, 0]), {key: v[:, 0] for key, v in info.items()}
+    (M,) = batch
     K = zs.shape[0]
     n = state.mean.shape[-1]
     m = hs.dim
@@ -169,7 +176,7 @@ def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_co
     nis, loglik = np.empty((K, M)), np.empty((K, M))
     dof = np.empty((K, M), dtype=np.int64)
     ok = np.ones(M, dtype=np.bool_)
-    gen = _linear_kernels("ekf", hs, F, Q)
+    gen = _linear_kernels(kind, hs, F, Q)
     if gen is not None:  # reads the measurements and writes the outputs in the track's layout, flattened per step
         args = (x, P, np.ascontiguousarray(zs, dtype=float).reshape(K, M * m), F, Q, lam, hs.A, hs.R, keep_cov,
                 means.reshape(K, M * n), covs.reshape(covs.shape[0], -1), innov.reshape(K, M * m), S.reshape(K, M * m * m),
@@ -177,10 +184,14 @@ def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_co
         generated.run_blocks(gen.sequence, args, M, gen.SEQUENCE_BLOCK, use_parallel(M))
     else:
         zl = np.ascontiguousarray(np.moveaxis(zs, 2, 1))  # (K, m, M)
-        valid = ~np.isnan(zl)
-        kernel = GK.ekf_sequence_parallel if use_parallel(M) else GK.ekf_sequence_serial
-        kernel((x, P), (zl, valid), Prediction(F, Q, lam), measurement_args(hs), keep_cov,
-               GaussSequenceOutputs(means, covs, innov, S, nis, dof, loglik, ok))
+        obs = (zl, ~np.isnan(zl))
+        outs = GaussSequenceOutputs(means, covs, innov, S, nis, dof, loglik, ok)
+        if kind == "ekf":
+            kernel = GK.ekf_sequence_parallel if use_parallel(M) else GK.ekf_sequence_serial
+            kernel((x, P), obs, Prediction(F, Q, lam), measurement_args(hs), keep_cov, outs)
+        else:
+            kernel = GK.sigma_sequence_parallel if use_parallel(M) else GK.sigma_sequence_serial
+            kernel((x, P), obs, Prediction(F, Q, lam), measurement_args(hs), _sigma_points(filt, n), keep_cov, outs)
     info = {
         "innovation": innov,
         "S": S,
@@ -205,11 +216,18 @@ def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_co
     return means, (covs if keep_cov else None), info
 
 
+def _sigma_points(filt, n: int) -> SigmaPoints:
+    """The UKF/CKF's sigma-point weights as the kernels take them (the centre point first where there is one)."""
+    cscale, wm, wc = filt.sigma_weights(n)
+    return SigmaPoints(float(cscale), np.ascontiguousarray(wm), np.ascontiguousarray(wc), wm.shape[0] % 2 == 1)
+
+
 EKF = CompiledPath(step=partial(gaussian_step, kind="ekf"), sequence=gaussian_sequence, online=partial(online_lane, kind="ekf"))
 """The compiled KF/EKF (``ExtendedKalmanFilter.compiled_path``)."""
 
-SIGMA = CompiledPath(step=partial(gaussian_step, kind="sigma"), online=partial(online_lane, kind="sigma"))
-"""The compiled UKF/CKF (``UnscentedKalmanFilter.compiled_path``); no whole-sequence path."""
+SIGMA = CompiledPath(step=partial(gaussian_step, kind="sigma"), sequence=partial(gaussian_sequence, kind="sigma"),
+                     online=partial(online_lane, kind="sigma"))
+"""The compiled UKF/CKF (``UnscentedKalmanFilter.compiled_path``)."""
 
 
 def measurement_correct(filt, hs, x_pred: np.ndarray, P_pred: np.ndarray, z: np.ndarray, k: int):

@@ -227,9 +227,10 @@ class FilterBase:
         """All steps of ``zs (K, *batch, m)`` in one compiled call, or ``None`` where that does not apply.
 
         :func:`pursuit.run` asks this first.  It applies to a compiled filter
-        whose implementation has a whole-sequence path (the KF/EKF with a
-        time-invariant linear motion model and no gate; the bootstrap PF with
-        a :class:`pursuit.RunStreams` of PCG64 streams), one batch axis, from
+        whose implementation has a whole-sequence path (the KF/EKF/UKF/CKF
+        with a time-invariant linear motion model and no gate; the bootstrap PF with
+        a :class:`pursuit.RunStreams` of PCG64 streams), one batch axis (the
+        UKF/CKF also batch ``()``), from
         a state at step 0; it gives the same bits as calling ``step`` K
         times.  Returns ``(means, covs, info)`` with time first (``covs`` is
         ``None`` unless ``keep_cov``).  A subclass that overrides ``step`` is
@@ -241,7 +242,7 @@ class FilterBase:
         if sequence is None or not self._sequence_applies(state):
             return None
         zs = np.asarray(zs, dtype=float)
-        if zs.ndim != 3 or zs.shape[1:-1] != state.batch or zs.shape[-1] != self._specs[1].dim:
-            return None  # the step path broadcasts or reports the shape
+        if zs.ndim != 2 + len(state.batch) or zs.shape[1:-1] != state.batch or zs.shape[-1] != self._specs[1].dim:
+            return None  # the step path broadcasts or reports the shape; the implementation checks the batch
         no_infinite_measurements(zs)
         return sequence(self, self._specs, state, zs, keep_cov)
