@@ -95,8 +95,9 @@ def save_figure(fig: Any, paths: list[Path], dpi: int = 150) -> None:
     (once to lay out, once to render): about 40 % of a figure's cost.  The
     first file (the PNG, which the report embeds) is drawn as before; the
     others are drawn with the layout it made (the figure's layout engine is
-    put back afterwards).  Measured on p1-wsn's figures: the PDF took 0.62x
-    the CPU time it took with its own layout.
+    put back afterwards).  Measured on p1-wsn's ten figures
+    (``benchmarks/_figure_cost.py``): the PDFs took 0.59x the CPU time they
+    took with their own layout.
     """
     if not paths:
         return
