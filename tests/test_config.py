@@ -66,7 +66,7 @@ def test_cpu_s_defaults_to_zero_and_is_read(tmp_path):
         ("runs = 3", "runs = 2.5", "experiment.runs: expected an integer", 3),
         ("seed = 1", "seed = -4", "experiment.seed: must be a non-negative integer", 4),
         ("seed = 1", "seed = 1\ncpu_s = -2.0", "experiment.cpu_s: must be a number of seconds >= 0", 5),
-        ("seed = 1", "seed = 1\ncpu_s = nan", "experiment.cpu_s: must be a number of seconds >= 0", 5),
+        ("seed = 1", "seed = 1\ncpu_s = nan", "experiment.cpu_s: must be finite", 5),
         ('type = "ukf"', 'type = "xkf"', "filters[1].type: unknown filter 'xkf'", 16),
         ("alpha = 0.5", "alpha = -0.5", "filters[1].alpha: must lie in", 17),
         ("alpha = 0.5", "fading = 0.5", "filters[1].fading.lam: must lie in", 17),
