@@ -40,8 +40,10 @@ docs: $(VENV)/.installed-docs
 	$(BIN)/python -m sphinx -b html -W --keep-going docs/api docs/_build/html
 	@echo "open docs/_build/html/index.html"
 
+# --workers auto: the experiments side by side, one process per core this make may use (docs/cli.md);
+# the files are the bits a serial run writes.  NumPy only: numba's cold compiles cost more than they save here.
 demo: $(VENV)/.installed
-	$(BIN)/pursuit reproduce all --out results
+	$(BIN)/pursuit reproduce all --workers auto --out results
 
 # tests/conftest.py points numba's cache (and the generated kernels) at one folder under
 # .test-cache/ for every worker and subprocess, named by a hash of src/pursuit/_compiled: the

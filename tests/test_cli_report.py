@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import pursuit
@@ -80,3 +81,58 @@ def test_reproduce_all_writes_an_index(tmp_path, capsys):
     (root / "index.html").unlink()
     assert main(["report", str(root)]) == 0
     assert (root / "index.html").read_text() == index
+
+
+def test_workers_auto_and_bad_words(tmp_path, capsys):
+    out = _run(tmp_path, "auto", "--workers", "auto")
+    assert json.loads((out / "run.json").read_text())["engine"]["backend"]["workers"] >= 1
+    with pytest.raises(SystemExit) as e:
+        main(["run", str(EXPERIMENT), "--workers", "many", "-o", str(tmp_path / "x")])
+    assert e.value.code == 2
+    assert "argument --workers: expected a whole number or 'auto', got 'many'" in capsys.readouterr().err
+
+
+def _comparable(folder: Path) -> dict[str, list[list[str]]]:
+    """Every CSV of an output folder, less the columns that are timings."""
+    out = {}
+    for path in sorted(folder.glob("*.csv")):
+        rows = [line.split(",") for line in path.read_text().splitlines()]
+        keep = [j for j, name in enumerate(rows[0]) if "wall" not in name and "per_s" not in name]
+        out[path.name] = [[r[j] for j in keep if j < len(r)] for r in rows]
+    return out
+
+
+def _no_wall_times(meta: np.ndarray) -> dict:
+    doc = json.loads(str(meta))
+    for f in doc.get("filters", []):
+        f.pop("wall_time", None)
+    return doc
+
+
+def test_reproduce_side_by_side_writes_the_serial_files(tmp_path, capsys):
+    from pursuit import cli
+    from pursuit.experiment import find_experiment, load_experiment
+
+    names = ["wsn-gaussian", "p4-maneuver"]
+    for name in names:
+        assert main(["reproduce", name, "--runs", "3", "--no-progress", "--no-pdf", "-o", str(tmp_path / "serial")]) == 0
+    exps = [load_experiment(find_experiment(n)) for n in names]
+    args = cli._parser().parse_args(["reproduce", "all", "--runs", "3", "--no-pdf", "--workers", "2"])
+    args.argv = ["reproduce", "all"]
+    capsys.readouterr()
+    cli._reproduce_side_by_side(exps, tmp_path / "side", args)
+    printed = capsys.readouterr().out
+    for name in names:
+        assert f"== {name}:" in printed
+        serial, side = tmp_path / "serial" / name, tmp_path / "side" / name
+        assert _comparable(serial) and _comparable(serial) == _comparable(side)
+        for npz in (serial / "results").glob("*.npz"):
+            a, b = np.load(npz), np.load(side / "results" / npz.name)
+            assert a.files == b.files
+            for key in a.files:  # the same bits, but the filters' wall times in meta
+                if key == "meta":
+                    assert _no_wall_times(a[key]) == _no_wall_times(b[key])
+                else:
+                    assert a[key].dtype == b[key].dtype and a[key].tobytes() == b[key].tobytes()
+        engine = json.loads((side / "run.json").read_text())["engine"]
+        assert engine["backend"] == {"backend": "serial", "workers": 1} and engine["experiments_side_by_side"] == 2

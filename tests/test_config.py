@@ -47,6 +47,13 @@ def test_bundled_experiments_load():
         load_experiment(find_experiment(name))
 
 
+def test_cpu_s_defaults_to_zero_and_is_read(tmp_path):
+    assert load_experiment(write(tmp_path, GOOD)).cpu_s == 0.0
+    assert load_experiment(write(tmp_path, GOOD.replace("seed = 1", "seed = 1\ncpu_s = 12.5"))).cpu_s == 12.5
+    # every bundled experiment says what it costs, so that reproduce --workers starts the costliest first
+    assert all(load_experiment(find_experiment(n)).cpu_s > 0 for n in list_experiments())
+
+
 @pytest.mark.parametrize(
     "old,new,field,line",
     [
@@ -58,6 +65,8 @@ def test_bundled_experiments_load():
         ("runs = 3", "runs = 0", "experiment.runs: must be at least 1", 3),
         ("runs = 3", "runs = 2.5", "experiment.runs: expected an integer", 3),
         ("seed = 1", "seed = -4", "experiment.seed: must be a non-negative integer", 4),
+        ("seed = 1", "seed = 1\ncpu_s = -2.0", "experiment.cpu_s: must be a number of seconds >= 0", 5),
+        ("seed = 1", "seed = 1\ncpu_s = nan", "experiment.cpu_s: must be finite", 5),
         ('type = "ukf"', 'type = "xkf"', "filters[1].type: unknown filter 'xkf'", 16),
         ("alpha = 0.5", "alpha = -0.5", "filters[1].alpha: must lie in", 17),
         ("alpha = 0.5", "fading = 0.5", "filters[1].fading.lam: must lie in", 17),

@@ -7,8 +7,10 @@
 ``pursuit track DATA --config M.toml`` run a configured filter on recorded or live measurements
 ``pursuit track --multi DETS --config M.toml`` track several targets in recorded or live detections
 
-``run`` and ``reproduce`` take ``--workers N`` (local processes) or
-``--scheduler tcp://HOST:PORT`` (a Dask cluster) to spread the chunks of runs.
+``run`` and ``reproduce`` take ``--workers N`` (local processes; ``auto``: one
+per core) or ``--scheduler tcp://HOST:PORT`` (a Dask cluster) to spread the
+chunks of runs; ``reproduce`` with several experiments and ``--workers N``
+runs the experiments side by side instead, one per process.
 
 ``pursuit`` alone prints this list of commands; ``pursuit --version`` the
 version; ``python -m pursuit`` is the same command.
@@ -153,7 +155,13 @@ def _parser(track: bool = True) -> argparse.ArgumentParser:
 def _add_engine_arguments(sp: argparse.ArgumentParser) -> None:
     g = sp.add_argument_group("where the runs are computed")
     where = g.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, metavar="N", help="spread chunks of runs over N local processes")
+    where.add_argument(
+        "--workers",
+        type=_workers,
+        metavar="N",
+        help="N local processes (or auto: one per core this process may use): reproduce with several experiments "
+        "runs them side by side, one per process; otherwise the chunks of runs are spread over them",
+    )
     where.add_argument(
         "--scheduler", metavar="tcp://HOST:PORT", help="run the chunks on a Dask cluster (needs pursuit[distributed])"
     )
@@ -177,6 +185,16 @@ def _add_engine_arguments(sp: argparse.ArgumentParser) -> None:
         help="default compute backend of filters whose table sets no `backend` (numba needs pursuit[fast]; "
         "default: $PURSUIT_COMPUTE_BACKEND or numpy). Not the same as --workers/--scheduler.",
     )
+
+
+def _workers(text: str) -> int:
+    """``--workers`` for argparse: a whole number or ``auto`` (the number is checked later, naming the flag)."""
+    from .engine.tasks import parse_workers  # light: no NumPy
+
+    try:
+        return parse_workers(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e).removeprefix("--workers: ")) from None
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -331,7 +349,7 @@ def _backend(args, source: str):
         raise ConfigError(source, str(e)) from None
 
 
-def _execute(exp, out_dir: Path, args, backend) -> None:
+def _execute(exp, out_dir: Path, args, backend, side_by_side: int = 1) -> None:
     from .engine.backends import engine_options
     from .engine.montecarlo import DEFAULT_CHUNK, DEFAULT_KEEP_RUNS
     from .report.output import format_table, write_output
@@ -349,6 +367,8 @@ def _execute(exp, out_dir: Path, args, backend) -> None:
         "chunk_size": output.sidecar.get("chunk_size") or DEFAULT_CHUNK,
         "store": args.store or "auto",
     }
+    if side_by_side > 1:  # reproduce --workers: this experiment computed whole in one of these processes
+        engine["experiments_side_by_side"] = side_by_side
     command = shlex.join(["pursuit", *args.argv])
     keep = DEFAULT_KEEP_RUNS if args.keep_runs is None else args.keep_runs
     write_output(output, out_dir, formats=formats, engine=engine, command=command, full_data=args.full_data, keep_runs=keep)
@@ -382,14 +402,57 @@ def _cmd_reproduce(args) -> int:
         for exp in exps:
             exp.check_runs(args.runs)
     root = Path(args.out) if args.out else Path("results")
-    with _backend(args, args.name) as backend:
-        for exp in exps:
-            _execute(exp, root / exp.name, args, backend)
-            print()
+    if len(exps) > 1 and args.scheduler is None and (args.workers or 1) > 1:
+        _reproduce_side_by_side(exps, root, args)
+    else:
+        with _backend(args, args.name) as backend:
+            for exp in exps:
+                _execute(exp, root / exp.name, args, backend)
+                print()
     if args.name == "all":
         index = write_index(root, [root / exp.name for exp in exps])
         print(f"wrote {index}")
     return 0
+
+
+def _reproduce_side_by_side(exps, root: Path, args) -> None:
+    """Every experiment whole in one of ``args.workers`` processes, the costliest (``cpu_s``) first.
+
+    Each experiment computes its runs serially in its process, as
+    ``--workers 1`` would, so its files are the same bits; its console output
+    is printed here, whole, when it ends (no progress bars).
+    """
+    from .engine.tasks import run_tasks
+
+    order = sorted(range(len(exps)), key=lambda i: -exps[i].cpu_s)  # stable: ties keep the file order
+    jobs = [(str(exp.path), str(root / exp.name), args) for exp in exps]
+    workers = min(args.workers, len(exps))
+    print(f"pursuit: {len(exps)} experiments side by side in {workers} processes", flush=True)
+
+    def show(i: int, text: str) -> None:
+        print(text, end="" if text.endswith("\n") else "\n")
+        print(flush=True)
+
+    run_tasks(_reproduce_one, jobs, workers, show, first=order)
+
+
+def _reproduce_one(path: str, out: str, args) -> str:
+    """One experiment of :func:`_reproduce_side_by_side`, in a worker: run, write, return what it printed."""
+    import io
+
+    from .engine.backends import Serial
+    from .experiment import load_experiment
+
+    if getattr(args, "compute_backend", None):
+        from .compute import set_default_backend
+
+        set_default_backend(args.compute_backend)
+    args = argparse.Namespace(**{**vars(args), "no_progress": True})
+    buffer = io.StringIO()
+    with contextlib.redirect_stdout(buffer), warnings.catch_warnings():
+        warnings.showwarning = _show_warning
+        _execute(load_experiment(path), Path(out), args, Serial(), side_by_side=args.workers)
+    return buffer.getvalue()
 
 
 def _cmd_report(args) -> int:

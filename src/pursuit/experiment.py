@@ -65,6 +65,9 @@ class Experiment:
         The parsed TOML, for the sidecar.
     plan
         The kind's prepared object, with ``run(runs, seed, progress, chunk_size)``.
+    cpu_s
+        Its measured CPU seconds (``[experiment] cpu_s``; 0 when not given):
+        ``pursuit reproduce --workers`` starts the costliest experiment first.
     """
 
     name: str
@@ -78,6 +81,7 @@ class Experiment:
     document: dict[str, Any]
     plan: Any
     reference: str = ""
+    cpu_s: float = 0.0
 
     def check_runs(self, runs: int) -> None:
         """Check the options that name a run (such as ``figures.trajectory_run``) against ``runs``.
@@ -162,6 +166,12 @@ def _nonneg_seed(field_name: str, v: int) -> int:
     return v
 
 
+def _nonneg_seconds(field_name: str, v: float) -> float:
+    if not v >= 0:  # also NaN
+        raise ValueError(f"{field_name}: must be a number of seconds >= 0, got {v}")
+    return v
+
+
 def _at_least_one(field_name: str, v: int) -> int:
     if v < 1:
         raise ValueError(f"{field_name}: must be at least 1, got {v}")
@@ -177,6 +187,11 @@ EXPERIMENT_PARAMS = (
     Param("seed", "int", 2026, "root seed (run i uses SeedSequence(seed, spawn_key=(i,)))", check=_nonneg_seed),
     Param("chunk_size", "int", None, "runs per chunk (memory bound; results do not depend on it)", check=_at_least_one),
     Param("reference", "str", "", "the paper or source the experiment reproduces"),
+    Param(
+        "cpu_s", "float", 0.0,
+        "CPU seconds it takes (measured; `reproduce --workers` starts the costliest first; results do not depend on it)",
+        check=_nonneg_seconds,
+    ),
 )
 
 
@@ -253,6 +268,7 @@ def _build(doc: dict[str, Any], path: Path) -> Experiment:
         document=doc,
         plan=plan,
         reference=values["reference"],
+        cpu_s=values["cpu_s"],
     )
 
 
