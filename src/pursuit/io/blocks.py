@@ -117,7 +117,7 @@ class EstimateBlock:
         from .tracker import Estimate
 
         return [
-            Estimate(time=t, mean=self.means[i], var=self.var[i], nis=nis, dof=dof, flags=flags, lines=(line,), cov=self.covs[i])
+            Estimate(time=t, mean=self.means[i], var=self.var[i].copy(), nis=nis, dof=dof, flags=flags, lines=(line,), cov=self.covs[i])
             for i, (t, nis, dof, flags, line) in enumerate(
                 zip(self.times.tolist(), self.nis.tolist(), self.dof, self.flags, self.lines.tolist())
             )
