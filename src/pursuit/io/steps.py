@@ -135,7 +135,11 @@ def assemble_steps(
     ----------
     items
         Records in arrival order (sort them first for the ``sort`` policy);
-        bad records and :data:`INPUT_WAITS` marks are passed through.
+        bad records and :data:`INPUT_WAITS` marks are passed through.  A
+        :class:`~pursuit.io.blocks.RecordBlock` of one sensor at strictly
+        increasing good times gives one :class:`~pursuit.io.blocks.StepBlock`
+        (all its steps but the last, which stays open); any other block is
+        taken record by record.
     sensors
         The configured sensors by id (``dim``, ``valid``, ``block``).
     measurement_dim
@@ -156,7 +160,7 @@ def assemble_steps(
 
     Yields
     ------
-    Step, BadRecord, Dropped or INPUT_WAITS
+    Step, StepBlock, BadRecord, Dropped or INPUT_WAITS
         In input order; a step is yielded when a later record arrives or the
         input ends.
     """
