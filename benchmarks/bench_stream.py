@@ -19,6 +19,8 @@ Run::
     PYTHONPATH=src .bench-venv/bin/python benchmarks/bench_stream.py            # 10^5 records (make bench)
     # memory over a long stream (a NumPy run of 10^6 records takes minutes: numba only)
     PYTHONPATH=src .bench-venv/bin/python benchmarks/bench_stream.py --records 1000000 --backends numba --formats csv --no-peer
+    # the code before a change in the same run (another checkout's src folder)
+    PYTHONPATH=src .bench-venv/bin/python benchmarks/bench_stream.py --before ../main/src
 """
 
 from __future__ import annotations
@@ -103,11 +105,16 @@ with open(sys.argv[1]) as src, open(sys.argv[2], "w") as out:
 """
 
 
-def _measure(cmd: list[str], pin: bool) -> tuple[float, float, float]:
-    """Wall seconds, peak RSS (MiB) and CPU seconds (user + system) of one subprocess, run from a fresh helper."""
+def _measure(cmd: list[str], pin: bool, src: str | None = None) -> tuple[float, float, float]:
+    """Wall seconds, peak RSS (MiB) and CPU seconds (user + system) of one subprocess, run from a fresh helper.
+
+    ``src``: the ``src`` folder of another checkout to import pursuit from (``--before``).
+    """
     if pin and shutil.which("taskset"):
         cmd = ["taskset", "-c", "1", *cmd]
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    if src is not None:
+        env["PYTHONPATH"] = src
     # ru_maxrss of RUSAGE_CHILDREN is the largest child so far: a fresh helper per run measures this one
     helper = (
         "import resource, subprocess, sys, time\n"
@@ -122,9 +129,10 @@ def _measure(cmd: list[str], pin: bool) -> tuple[float, float, float]:
     return float(wall), int(rss_kib) / 1024, float(cpu)
 
 
-def run_once(data: Path, model: Path, out: Path, pin: bool) -> tuple[float, float, float]:
+def run_once(data: Path, model: Path, out: Path, pin: bool, src: str | None = None) -> tuple[float, float, float]:
     """Wall seconds, peak RSS (MiB) and CPU seconds of one ``pursuit track --stream``."""
-    return _measure([sys.executable, "-m", "pursuit", "track", str(data), "--config", str(model), "--stream", "-o", str(out)], pin)
+    cmd = [sys.executable, "-m", "pursuit", "track", str(data), "--config", str(model), "--stream", "-o", str(out)]
+    return _measure(cmd, pin, src)
 
 
 def run_peer(data: Path, out: Path, pin: bool) -> tuple[float, float, float] | None:
@@ -144,6 +152,9 @@ def main(argv: list[str] | None = None, quick: bool = False) -> None:
     ap.add_argument("--formats", nargs="+", default=["csv", "jsonl"])
     ap.add_argument("--no-pin", action="store_true", help="do not pin the child to core 1")
     ap.add_argument("--no-peer", action="store_true", help="leave out the FilterPy loop")
+    ap.add_argument(
+        "--before", metavar="SRC", help="also run pursuit from this src folder (another checkout: the code before a change), in the same run"
+    )
     args = ap.parse_args(argv if argv is not None else [])
     os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(tempfile.gettempdir()) / "pursuit-bench-numba"))
     pin = not args.no_pin
@@ -154,11 +165,19 @@ def main(argv: list[str] | None = None, quick: bool = False) -> None:
         small.mkdir()
         start_inputs = write_inputs(small, 100)
         startup = {}
+        versions = [("", None)] + ([(" (before)", args.before)] if args.before else [])
         for b in args.backends:
             models[b] = folder / f"model-{b}.toml"
             models[b].write_text(MODEL.format(backend=b))
-            run_once(start_inputs["csv"], models[b], small / "out.csv", pin)  # warms the numba cache: no compile measured
-            startup[b] = _medians([run_once(start_inputs["csv"], models[b], small / "out.csv", pin) for _ in range(args.repeats)])
+            for tag, src in versions:
+                run_once(start_inputs["csv"], models[b], small / "out.csv", pin, src)  # warms the numba cache: no compile measured
+                startup[b, tag] = _medians([run_once(start_inputs["csv"], models[b], small / "out.csv", pin, src) for _ in range(args.repeats)])
+        print("Start-up: the whole command on 100 records (CSV).\n")
+        print("| run | wall, s | CPU, s | peak RSS, MiB |")
+        print("|---|---:|---:|---:|")
+        for (b, tag), (wall, rss, cpu) in startup.items():
+            print(f"| pursuit track --stream, {b}{tag} | {wall:.2f} | {cpu:.2f} | {rss:.0f} |")
+        print()
         print(
             "Records/s = records / time of the whole command: wall time, and CPU time (user + system) *after start-up*, "
             "which subtracts the CPU time of the same command on 100 records (interpreter, imports, model: paid once by a "
@@ -177,10 +196,12 @@ def main(argv: list[str] | None = None, quick: bool = False) -> None:
                 print(f"| {n:,} | csv | FilterPy loop (peer) | {n / peer[0]:,.0f} | {peer_rate:,.0f} | 1 | {peer[1]:.0f} |")
             for fmt in args.formats:
                 for b in args.backends:
-                    wall, rss, cpu = _medians([run_once(inputs[fmt], models[b], folder / f"out.{fmt}", pin) for _ in range(args.repeats)])
-                    rate = n / max(cpu - startup[b][2], 1e-9)
-                    ratio = f"{rate / peer_rate:.2f}" if peer_rate else "-"
-                    print(f"| {n:,} | {fmt} | pursuit track --stream, {b} | {n / wall:,.0f} | {rate:,.0f} | {ratio} | {rss:.0f} |", flush=True)
+                    for tag, src in versions:
+                        runs = [run_once(inputs[fmt], models[b], folder / f"out.{fmt}", pin, src) for _ in range(args.repeats)]
+                        wall, rss, cpu = _medians(runs)
+                        rate = n / max(cpu - startup[b, tag][2], 1e-9)
+                        ratio = f"{rate / peer_rate:.2f}" if peer_rate else "-"
+                        print(f"| {n:,} | {fmt} | pursuit track --stream, {b}{tag} | {n / wall:,.0f} | {rate:,.0f} | {ratio} | {rss:.0f} |", flush=True)
 
 
 def _medians(runs: list[tuple[float, float, float]]) -> tuple[float, float, float]:

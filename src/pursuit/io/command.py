@@ -32,10 +32,11 @@ from pathlib import Path
 from typing import BinaryIO, TextIO
 
 from .extras import Extras
+from .blocks import EstimateBlock
 from .lines import ChunkedLines
 from .model import TrackModel, load_track_model
 from .output_file import same_file, same_file_as_stream, write_whole
-from .records import FORMATS, BadRecord, read_records
+from .records import FORMATS, BadRecord, read_record_chunks, read_records
 from .steps import OUT_OF_ORDER, Dropped
 from .tracker import Estimate, stream_records, track_records
 from .writers import OUTPUT_FORMATS, make_writer
@@ -132,11 +133,17 @@ def run_track(args: argparse.Namespace, *, stdin: BinaryIO | None = None, stdout
         # a stream is read in chunks of what has arrived (ChunkedLines), and filtered in blocks that end there
         lines = ChunkedLines(fh) if streaming else fh
         # a stream's last line without its newline was cut off mid-write; a file's may just lack one
-        records = extras.watch(
-            read_records(lines, in_fmt, unterminated="reject" if streaming else "hint", layout=model.input)
-        )
+        if streaming and model.prior is not None and not args.plot:
+            # whole chunks at once (blocks of plain records; the same records and messages), with the wait marks
+            records = read_record_chunks(lines.chunks(), in_fmt, unterminated="reject", layout=model.input, ready=lines.ready)
+            ready = None
+        else:
+            records = extras.watch(
+                read_records(lines, in_fmt, unterminated="reject" if streaming else "hint", layout=model.input)
+            )
+            ready = lines.ready if streaming else None
         if streaming:
-            code = _stream(records, model, args, out_fmt, policy, source, stdout, stderr, extras.sink, lines)
+            code = _stream(records, model, args, out_fmt, policy, source, stdout, stderr, extras.sink, lines, ready)
         else:
             code = _batch(records, model, args, out_fmt, policy, source, stdout, stderr, extras.sink)
         return extras.finish(stderr) if code == EXIT_OK else code
@@ -294,7 +301,9 @@ def _batch(records, model: TrackModel, args, out_fmt, policy, source, stdout, st
 # --------------------------------------------------------------------------
 # stream: estimate by estimate
 # --------------------------------------------------------------------------
-def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, stderr, collected: list | None, lines: ChunkedLines) -> int:
+def _stream(
+    records, model: TrackModel, args, out_fmt, policy, source, stdout, stderr, collected: list | None, lines: ChunkedLines, ready
+) -> int:
     if args.output:
         try:
             out = open(args.output, "w", encoding="utf-8", newline="")
@@ -311,8 +320,13 @@ def _stream(records, model: TrackModel, args, out_fmt, policy, source, stdout, s
         guarded.flush()
         # every estimate written is flushed before the input is waited for: as live as a flush per row
         lines.before_wait = guarded.flush
-        for event in stream_records(records, model, out_of_order=policy, stop_at_bad=not args.skip_bad, ready=lines.ready):
-            if isinstance(event, Estimate):
+        for event in stream_records(records, model, out_of_order=policy, stop_at_bad=not args.skip_bad, ready=ready, blocks=True):
+            if isinstance(event, EstimateBlock):
+                writer.write_block(event)
+                if collected is not None:
+                    collected.extend(event.estimates())
+                written += len(event)
+            elif isinstance(event, Estimate):
                 writer.write(event)
                 if collected is not None:  # only for --truth / --plot: a live stream may run for days
                     collected.append(event)

@@ -8,7 +8,9 @@ tells a consumer whether a line is at hand without waiting (so
 :func:`pursuit.io.tracker.stream_records` can end a block of steps there),
 and ``before_wait`` runs each time the reader is about to wait for more
 input (``pursuit track --stream`` flushes its output there: every estimate
-written is flushed before the process could block).
+written is flushed before the process could block).  :meth:`ChunkedLines.chunks`
+gives the same lines as lists of what one read brought, for readers that parse
+a chunk at once (:func:`pursuit.io.records.read_record_chunks`).
 """
 
 from __future__ import annotations
@@ -71,6 +73,18 @@ class ChunkedLines:
             tail = parts.pop()
             self._tail = [tail] if tail else []
             self._lines.extend(p + b"\n" for p in parts)
+
+    def chunks(self) -> Iterator[list[bytes]]:
+        """The lines in lists: each list is every line at hand (one read's worth), waiting only when none is."""
+        lines = self._lines
+        while True:
+            if not lines:
+                self._fill()
+                if not lines:
+                    return
+            batch = list(lines)
+            lines.clear()
+            yield batch
 
     def __iter__(self) -> Iterator[bytes]:
         lines = self._lines

@@ -33,8 +33,11 @@ import math
 import re
 from dataclasses import dataclass
 from datetime import datetime, timezone
-from typing import Any, Iterable, Iterator, Mapping
+from typing import Any, Callable, Iterable, Iterator, Mapping
 
+import numpy as np
+
+from .blocks import RecordBlock
 from .input_spec import InputSpec
 
 __all__ = [
@@ -43,6 +46,7 @@ __all__ = [
     "read_csv",
     "read_jsonl",
     "read_records",
+    "read_record_chunks",
     "check_record",
     "FORMATS",
 ]
@@ -304,41 +308,142 @@ def read_csv(
     complete only at its newline, so a half-written ``78.43`` cut to ``7``
     is never read as 7).
     """
-    if unterminated not in UNTERMINATED:
-        raise ValueError(f"unterminated: must be one of {', '.join(UNTERMINATED)}, got {unterminated!r}")
-    spec = layout or _DEFAULT_SPEC
-    clock = _Clock(spec.time_origin)
-    columns: _Columns | None = None
-    content_seen = False
-    lineno = 0
-    for lineno, raw in enumerate(lines, start=1):
+    reader = _CsvReader(unterminated, layout)
+    for raw in lines:
+        yield from reader.line(raw)
+        if reader.stopped:
+            return
+    yield from reader.end()
+
+
+class _CsvReader:
+    """The state of :func:`read_csv` (line number, header, clock), one line or one chunk of lines at a time."""
+
+    def __init__(self, unterminated: str, layout: InputSpec | None):
+        if unterminated not in UNTERMINATED:
+            raise ValueError(f"unterminated: must be one of {', '.join(UNTERMINATED)}, got {unterminated!r}")
+        self.unterminated = unterminated
+        self.spec = layout or _DEFAULT_SPEC
+        self.clock = _Clock(self.spec.time_origin)
+        self.columns: _Columns | None = None
+        self.content_seen = False
+        self.lineno = 0
+        self.stopped = False  # a header that does not fit ends the input
+
+    def line(self, raw: bytes | str) -> list[Record | BadRecord]:
+        """The records of the next line."""
+        self.lineno += 1
+        lineno, unterminated = self.lineno, self.unterminated
         cut = unterminated != "accept" and not _terminated(raw)
         try:
             text = _decode(raw, lineno)
             if not text.strip() or text.lstrip().startswith("#"):
-                continue
-            content_seen = True
+                return []
+            self.content_seen = True
             if cut and unterminated == "reject":
                 raise _Bad("record", _CUT_MESSAGE)
             fields = _split_csv(text)
-            if columns is None:
+            if self.columns is None:
                 try:
-                    columns = _Columns.from_header(fields, spec)
+                    self.columns = _Columns.from_header(fields, self.spec)
                 except _Bad as e:
-                    yield BadRecord(lineno, e.field, e.message)
-                    return  # every row would be misread: one error, not one per row
-                continue
-            yield from columns.records(lineno, fields, clock)
+                    self.stopped = True  # every row would be misread: one error, not one per row
+                    return [BadRecord(lineno, e.field, e.message)]
+                return []
+            return list(self.columns.records(lineno, fields, self.clock))
         except _Bad as e:
-            content_seen = True
-            yield BadRecord(lineno, e.field, e.message + (_CUT_HINT if cut and unterminated == "hint" else ""))
-    if not content_seen:  # nothing but blank and comment lines: no header to read
+            self.content_seen = True
+            return [BadRecord(lineno, e.field, e.message + (_CUT_HINT if cut and unterminated == "hint" else ""))]
+
+    def chunk(self, raws: list[bytes]) -> list:
+        """The records of the next lines: :class:`~pursuit.io.blocks.RecordBlock` objects for runs of plain lines."""
+        out: list = []
+        i = 0
+        while self.columns is None and i < len(raws) and not self.stopped:  # up to the header, line by line
+            out.extend(self.line(raws[i]))
+            i += 1
+        if not self.stopped:
+            _blocks_or_lines(self, raws[i:] if i else raws, out)
+        return out
+
+    def _plain(self, raws: list[bytes]):
+        """The chunk as one block, or None when any line needs the line-by-line reader (which names the problem)."""
+        cols = self.columns
+        if cols is None or cols.time != 0 or cols.sensor != 1 or self.clock.kind == "iso" or len(raws) < 2:
+            return None
+        if not raws[-1].endswith(b"\n"):
+            return None
+        data = b"".join(raws)
+        if b'"' in data or b"\r" in data or b"\x00" in data:
+            return None
+        try:
+            text = data.decode("utf-8")
+        except UnicodeDecodeError:
+            return None
+        rows = [line.split(",") for line in text[:-1].split("\n")]
+        if len(rows) != len(raws):
+            return None
+        width = len(rows[0])
+        if width < 3 or any(len(r) != width for r in rows):
+            return None
+        columns = list(zip(*rows))
+        sensors = columns[1]
+        names = set(sensors)
+        if any(not name or name != name.strip() for name in names):
+            return None
+        numbers = [columns[0], *columns[2:]]
+        # only the characters of a plain number: float() then reads exactly what _NUMBER matches (no spaces, _ or words)
+        if "".join(["".join(c) for c in numbers]).translate(_PLAIN_NUMBER):
+            return None
+        try:
+            table = np.array([list(map(float, c)) for c in numbers], dtype=float)
+        except ValueError:
+            return None
+        if not np.isfinite(table).all():
+            return None
+        if self.clock.kind is None:  # the first good time decides the kind of the input's times
+            self.clock._agree("number", self.lineno + 1)
+        first = self.lineno + 1
+        return RecordBlock(np.arange(first, first + len(raws)), table[0], list(sensors), table[1:].T)
+
+    def end(self) -> list[BadRecord]:
+        """The problem of an input that ended without a header, if it is one."""
+        if self.content_seen or self.stopped:
+            return []
+        spec, lineno = self.spec, self.lineno
         what = "the input is empty" if lineno == 0 else "the input has only blank and comment lines"
         if spec.columns is None:
             header = f"{spec.time_column},{spec.sensor_column},value"
         else:
             header = ",".join([spec.time_column, *(c for cols in spec.columns.values() for c in cols)])
-        yield BadRecord(max(lineno, 1), "header", f"missing: {what} (expected the header '{header}')")
+        return [BadRecord(max(lineno, 1), "header", f"missing: {what} (expected the header '{header}')")]
+
+
+_PLAIN_NUMBER = str.maketrans("", "", "0123456789.eE+-")
+_SMALLEST_SPLIT = 32
+
+
+def _blocks_or_lines(reader: Any, raws: list[bytes], out: list) -> None:
+    """Append the records of ``raws`` to ``out``: a block where all are plain, else halves, else line by line.
+
+    Halving finds the plain runs around a bad line at the cost of a few more
+    tries, in input order, so the reader's state advances as line by line.
+    """
+    block = reader._plain(raws)
+    if block is not None:
+        reader.lineno += len(raws)
+        out.append(block)
+        return
+    if len(raws) >= 2 * _SMALLEST_SPLIT:
+        half = len(raws) // 2
+        _blocks_or_lines(reader, raws[:half], out)
+        if not reader.stopped:
+            _blocks_or_lines(reader, raws[half:], out)
+        return
+    for raw in raws:
+        out.extend(reader.line(raw))
+        if reader.stopped:
+            return
 
 
 def _split_csv(text: str) -> list[str]:
@@ -457,15 +562,32 @@ def read_jsonl(
     ``layout.time_origin``, the Unix epoch by default); the column names of
     ``layout`` apply to CSV only.
     """
-    if unterminated not in UNTERMINATED:
-        raise ValueError(f"unterminated: must be one of {', '.join(UNTERMINATED)}, got {unterminated!r}")
-    clock = _Clock((layout or _DEFAULT_SPEC).time_origin)
-    for lineno, raw in enumerate(lines, start=1):
+    reader = _JsonlReader(unterminated, layout)
+    for raw in lines:
+        yield from reader.line(raw)
+
+
+class _JsonlReader:
+    """The state of :func:`read_jsonl` (line number, clock), one line or one chunk of lines at a time."""
+
+    stopped = False
+
+    def __init__(self, unterminated: str, layout: InputSpec | None):
+        if unterminated not in UNTERMINATED:
+            raise ValueError(f"unterminated: must be one of {', '.join(UNTERMINATED)}, got {unterminated!r}")
+        self.unterminated = unterminated
+        self.clock = _Clock((layout or _DEFAULT_SPEC).time_origin)
+        self.lineno = 0
+
+    def line(self, raw: bytes | str) -> list[Record | BadRecord]:
+        """The record of the next line (none for a blank line)."""
+        self.lineno += 1
+        lineno, unterminated = self.lineno, self.unterminated
         cut = unterminated != "accept" and not _terminated(raw)
         try:
             text = _decode(raw, lineno)
             if not text.strip():
-                continue
+                return []
             if cut and unterminated == "reject":
                 raise _Bad("record", _CUT_MESSAGE)
             try:
@@ -474,9 +596,61 @@ def read_jsonl(
                 raise _Bad("record", f"not valid JSON ({e.msg} at column {e.colno})") from None
             except (ValueError, RecursionError) as e:  # huge integers, absurd nesting
                 raise _Bad("record", f"not valid JSON ({type(e).__name__})") from None
-            yield _json_record(lineno, obj, clock)
+            return [_json_record(lineno, obj, self.clock)]
         except _Bad as e:
-            yield BadRecord(lineno, e.field, e.message + (_CUT_HINT if cut and unterminated == "hint" else ""))
+            return [BadRecord(lineno, e.field, e.message + (_CUT_HINT if cut and unterminated == "hint" else ""))]
+
+    def chunk(self, raws: list[bytes]) -> list:
+        """The records of the next lines: :class:`~pursuit.io.blocks.RecordBlock` objects for runs of plain lines."""
+        out: list = []
+        _blocks_or_lines(self, raws, out)
+        return out
+
+    def _plain(self, raws: list[bytes]):
+        """The chunk as one block, or None when any line needs the line-by-line reader (which names the problem).
+
+        Plain lines are ``{"time": number, "sensor": "id", "value": [numbers]}`` (keys in any order, each
+        once: a line holds exactly 8 quotes), with finite numbers and times in seconds.
+        """
+        if self.clock.kind == "iso" or len(raws) < 2 or not raws[-1].endswith(b"\n"):
+            return None
+        if any(raw.count(b'"') != 8 for raw in raws):  # a repeated key or a quoted value needs more quotes
+            return None
+        data = b"".join(raws)
+        if b"\x00" in data or b"NaN" in data or b"Infinity" in data:
+            return None
+        try:
+            objs = json.loads(b"[" + data[:-1].replace(b"\n", b",") + b"]")
+        except (ValueError, RecursionError):
+            return None  # one line is not valid JSON (or not UTF-8): the line reader names it
+        if len(objs) != len(raws) or any(type(o) is not dict or o.keys() != _PLAIN_KEYS for o in objs):
+            return None
+        times = [o["time"] for o in objs]
+        sensors = [o["sensor"] for o in objs]
+        values = [o["value"] for o in objs]
+        if not set(map(type, times)) <= _NUMBER_TYPES or set(map(type, sensors)) != {str}:
+            return None
+        if any(not name or name != name.strip() for name in set(sensors)):
+            return None
+        if set(map(type, values)) != {list} or len(set(map(len, values))) != 1 or not values[0]:
+            return None
+        if not {type(v) for row in values for v in row} <= _NUMBER_TYPES:
+            return None
+        try:
+            t = np.array(times, dtype=float)
+            v = np.array(values, dtype=float)
+        except (OverflowError, ValueError):
+            return None
+        if not (np.isfinite(t).all() and np.isfinite(v).all()):
+            return None
+        if self.clock.kind is None:  # the first good time decides the kind of the input's times
+            self.clock._agree("number", self.lineno + 1)
+        first = self.lineno + 1
+        return RecordBlock(np.arange(first, first + len(raws)), t, sensors, v)
+
+
+_PLAIN_KEYS = {"time", "sensor", "value"}
+_NUMBER_TYPES = {int, float}
 
 
 def _json_record(lineno: int, obj: Any, clock: _Clock) -> Record:
@@ -524,6 +698,41 @@ def read_records(
     if fmt == "jsonl":
         return read_jsonl(lines, unterminated, layout)
     raise ValueError(f"format: must be one of {', '.join(FORMATS)}, got {fmt!r}")
+
+
+def read_record_chunks(
+    chunks: Iterable[list[bytes]],
+    fmt: str,
+    unterminated: str = "accept",
+    layout: InputSpec | None = None,
+    ready: Callable[[], bool] | None = None,
+) -> Iterator[Any]:
+    """:func:`read_records` over chunks of lines: a chunk of plain lines comes out as one :class:`~pursuit.io.blocks.RecordBlock`.
+
+    The records, the bad records and their messages are those of
+    :func:`read_records` on the same lines (a chunk with any line that is
+    not plain is read line by line).  ``ready`` as in
+    :func:`pursuit.io.steps.mark_waits`: an :data:`~pursuit.io.steps.INPUT_WAITS`
+    mark comes before each chunk whose taking may wait (a chunk is what the
+    input had at hand, see :meth:`pursuit.io.lines.ChunkedLines.chunks`).
+    """
+    from .steps import INPUT_WAITS
+
+    if fmt not in FORMATS:
+        raise ValueError(f"format: must be one of {', '.join(FORMATS)}, got {fmt!r}")
+    reader = _CsvReader(unterminated, layout) if fmt == "csv" else _JsonlReader(unterminated, layout)
+    it = iter(chunks)
+    while True:
+        if ready is not None and not ready():
+            yield INPUT_WAITS
+        raws = next(it, None)
+        if raws is None:
+            break
+        yield from reader.chunk(raws)
+        if reader.stopped:
+            return
+    if fmt == "csv":
+        yield from reader.end()
 
 
 # --------------------------------------------------------------------------

@@ -34,6 +34,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping
 
 import numpy as np
 
+from .blocks import RecordBlock, StepBlock
 from .records import BadRecord, Record, check_record
 
 __all__ = ["Step", "Dropped", "OUT_OF_ORDER", "INPUT_WAITS", "assemble_steps", "mark_waits", "sort_records"]
@@ -134,7 +135,11 @@ def assemble_steps(
     ----------
     items
         Records in arrival order (sort them first for the ``sort`` policy);
-        bad records and :data:`INPUT_WAITS` marks are passed through.
+        bad records and :data:`INPUT_WAITS` marks are passed through.  A
+        :class:`~pursuit.io.blocks.RecordBlock` of one sensor at strictly
+        increasing good times gives one :class:`~pursuit.io.blocks.StepBlock`
+        (all its steps but the last, which stays open); any other block is
+        taken record by record.
     sensors
         The configured sensors by id (``dim``, ``valid``, ``block``).
     measurement_dim
@@ -155,7 +160,7 @@ def assemble_steps(
 
     Yields
     ------
-    Step, BadRecord, Dropped or INPUT_WAITS
+    Step, StepBlock, BadRecord, Dropped or INPUT_WAITS
         In input order; a step is yielded when a later record arrives or the
         input ends.
     """
@@ -167,28 +172,79 @@ def assemble_steps(
         if item is INPUT_WAITS:
             yield item  # the step being assembled stays open: a record of its time may still come
             continue
-        bad = _problem(item, sensors, after, pending, pending_time, policy)
-        if bad is None:
-            bad = _too_far(item, pending[0].line if pending else None, pending_time if pending else after, max_gap)
-        if isinstance(bad, Dropped):
-            yield bad
-            continue
-        if bad is not None:
-            if stop_at_bad:
+        if isinstance(item, RecordBlock):
+            fast = _plain_block(item, sensors, measurement_dim, after, pending_time, max_gap)
+            if fast is not None:
                 if pending:
                     yield _make_step(pending, sensors, measurement_dim)
+                steps, last = fast
+                if steps is not None:
+                    yield steps
+                pending, pending_time = [last], last.time  # the last time stays open: a record of it may still come
+                continue
+            todo = item.records()  # the block is not plain: record by record, as the reference
+        else:
+            todo = (item,)
+        for rec in todo:
+            bad = _problem(rec, sensors, after, pending, pending_time, policy)
+            if bad is None:
+                bad = _too_far(rec, pending[0].line if pending else None, pending_time if pending else after, max_gap)
+            if isinstance(bad, Dropped):
                 yield bad
-                return
-            yield bad
-            continue
-        rec = item
-        if pending_time is not None and rec.time > pending_time:
-            yield _make_step(pending, sensors, measurement_dim)
-            pending = []
-        pending.append(rec)
-        pending_time = rec.time
+                continue
+            if bad is not None:
+                if stop_at_bad:
+                    if pending:
+                        yield _make_step(pending, sensors, measurement_dim)
+                    yield bad
+                    return
+                yield bad
+                continue
+            if pending_time is not None and rec.time > pending_time:
+                yield _make_step(pending, sensors, measurement_dim)
+                pending = []
+            pending.append(rec)
+            pending_time = rec.time
     if pending:
         yield _make_step(pending, sensors, measurement_dim)
+
+
+def _plain_block(
+    block: RecordBlock, sensors: Mapping[str, Any], m: int, after: float | None, pending_time: float | None, max_gap: float
+) -> tuple[StepBlock | None, Record] | None:
+    """A block whose records are each a step of their own and all good: (its steps but the last, the last record).
+
+    None when any record of the block is bad, late, shares a time or needs
+    another rule: the caller then takes it record by record.
+    """
+    names = set(block.sensors)
+    if len(names) != 1:
+        return None
+    (sid,) = names
+    spec = sensors.get(sid)
+    values, times = block.values, block.times
+    if spec is None or spec.dim != values.shape[1]:
+        return None
+    lo, hi = spec.valid
+    if not (np.all(values >= lo) and np.all(values <= hi)):
+        return None
+    reached = pending_time if pending_time is not None else after
+    if after is not None and not times[0] > after:
+        return None
+    if pending_time is not None and not times[0] > pending_time:
+        return None
+    gaps = np.diff(times)
+    if not np.all(gaps > 0) or np.any(gaps > max_gap):
+        return None
+    if reached is not None and times[0] - reached > max_gap:
+        return None
+    last = Record(int(block.lines[-1]), float(times[-1]), sid, tuple(values[-1].tolist()))
+    n = len(times)
+    if n == 1:
+        return None, last
+    z = np.full((n - 1, m), math.nan)
+    z[:, spec.block] = values[:-1]
+    return StepBlock(times[:-1], z, block.lines[:-1], block.sensors[:-1]), last
 
 
 def _problem(item, sensors, after, pending, pending_time, policy) -> BadRecord | Dropped | None:

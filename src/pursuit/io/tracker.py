@@ -32,6 +32,7 @@ from ..rng import RunStreams
 from .initiate import initiate
 from .model import TrackModel
 from .records import BadRecord, Record
+from .blocks import EstimateBlock, StepBlock
 from .steps import INPUT_WAITS, Dropped, Step, assemble_steps, mark_waits, sort_records
 
 __all__ = ["Estimate", "Tracker", "StepRefused", "TrackResult", "track_records", "stream_records", "BLOCK_STEPS"]
@@ -180,13 +181,61 @@ class Tracker:
         calls of :meth:`update` (the filter's contract), so the estimates are those
         :meth:`update` would give; otherwise the caller steps the block.
         """
-        if self._sequence_off or self._flag_keys is None or self.time is None or not steps or not isinstance(self.state, GaussianState):
+        if not steps:
             return None
         times = np.fromiter((s.time for s in steps), dtype=float, count=len(steps))
+        result = self._sequence(times, np.stack([s.z for s in steps]))
+        if result is None:
+            return None
+        means, covs, var, nis, dof, flag_rows = result
+        out = []
+        for i, step in enumerate(steps):
+            flags = [key for key, row in zip(self._flag_keys, flag_rows) if row[i]]
+            out.append(self._estimate(step, means[i], var[i].copy(), covs[i], float(nis[i]), int(dof[i]), flags))
+        return out
+
+    def update_block(self, times: np.ndarray, zs: np.ndarray, lines: np.ndarray) -> EstimateBlock | None:
+        """:meth:`update_sequence` on steps given as columns (times ``(n,)``, measurements ``(n, m)``, one line each).
+
+        The estimates are those of :meth:`update_sequence` (and so of
+        :meth:`update`), as one :class:`~pursuit.io.blocks.EstimateBlock`; None
+        (nothing changed) where the compiled sequence does not apply.
+        """
+        result = self._sequence(times, zs) if len(times) else None
+        if result is None:
+            return None
+        means, covs, var, nis, dof, flag_rows = result
+        n = len(times)
+        nis_list = nis.tolist()
+        diverged = self.monitor.update_many(nis_list, dof)
+        flags: list[tuple[str, ...]] = [()] * n
+        marked = np.zeros(n, dtype=bool)
+        for row in flag_rows:
+            marked |= np.asarray(row, dtype=bool)
+        marked |= np.asarray(dof) == 0
+        marked |= np.asarray(diverged, dtype=bool)
+        for i in np.flatnonzero(marked).tolist():  # the rare rows with a flag, in _estimate's order
+            names = [key for key, row in zip(self._flag_keys, flag_rows) if row[i]]
+            if dof[i] == 0:
+                names.append("predict")
+            if diverged[i] and DIVERGED_KEY not in names:
+                names.append(DIVERGED_KEY)
+            flags[i] = tuple(names)
+        return EstimateBlock(times, means, var, nis, dof, flags, lines, covs)
+
+    def _sequence(self, times: np.ndarray, zs: np.ndarray):
+        """The compiled sequence from the current state over ``zs`` at ``times``, advancing the tracker.
+
+        ``(means, covs, var, nis, dof, flag_rows)``, or None (nothing changed)
+        where it does not apply or the block is not healthy.
+        """
+        if self._sequence_off or self._flag_keys is None or self.time is None or not isinstance(self.state, GaussianState):
+            return None
+        n = len(times)
         dts = np.diff(times, prepend=self.time)
         if not np.all(dts == self.model.dt) or getattr(self.state, "memory", None) is not None:
             return None  # irregular sampling: the motion differs per step, which the sequence cannot take
-        zs = np.stack([s.z for s in steps])[:, None, :]
+        zs = zs[:, None, :]
         try:
             start = dataclasses.replace(self.state, k=0)  # the model is time-invariant: k names no step in it
             with np.errstate(all="ignore"):
@@ -202,20 +251,16 @@ class Tracker:
             return None
         means, covs = means[:, 0], covs[:, 0]
         var = np.diagonal(covs, axis1=1, axis2=2)
-        nis = np.asarray(info["nis"], dtype=float).reshape(len(steps))
+        nis = np.asarray(info["nis"], dtype=float).reshape(n)
         with np.errstate(invalid="ignore"):
             healthy = np.all(np.isfinite(means)) and np.all(np.isfinite(covs)) and np.all(var > 0) and not np.any(nis < 0)
         if not healthy:
             return None  # the caller steps the block and refuses the steps that break the filter
-        dof = np.asarray(info["dof"]).reshape(len(steps)).tolist()
-        flag_rows = [np.asarray(info[key]).reshape(len(steps)).tolist() for key in self._flag_keys]
-        out = []
-        for i, step in enumerate(steps):
-            flags = [key for key, row in zip(self._flag_keys, flag_rows) if row[i]]
-            out.append(self._estimate(step, means[i], var[i].copy(), covs[i], float(nis[i]), int(dof[i]), flags))
-        self.state = dataclasses.replace(self.state, mean=means[-1:].copy(), cov=covs[-1:].copy(), k=self.k + len(steps))
-        self.time, self.k = steps[-1].time, self.k + len(steps)
-        return out
+        dof = np.asarray(info["dof"]).reshape(n).tolist()
+        flag_rows = [np.asarray(info[key]).reshape(n).tolist() for key in self._flag_keys]
+        self.state = dataclasses.replace(self.state, mean=means[-1:].copy(), cov=covs[-1:].copy(), k=self.k + n)
+        self.time, self.k = float(times[-1]), self.k + n
+        return means, covs, var, nis, dof, flag_rows
 
 
 class _Streak:
@@ -245,6 +290,10 @@ class _Streak:
         if self.length >= self.test.streak:
             self.flagged = True
         return self.flagged
+
+    def update_many(self, nis: list[float], dof: list[int]) -> list[bool]:
+        """:meth:`update` over consecutive steps; whether the run is flagged after each."""
+        return [self.update(a, b) for a, b in zip(nis, dof)]
 
 
 def _initiation_estimate(step: Step, g, flags: tuple[str, ...]) -> Estimate:
@@ -318,13 +367,24 @@ def track_records(items: Iterable[Record | BadRecord], model: TrackModel, *, out
     return result
 
 
-def _filter_block(tracker: Tracker, block: list[Step], stop_at_bad: bool) -> Iterator[Estimate | BadRecord]:
+def _filter_block(tracker: Tracker, block: list[Step | StepBlock], stop_at_bad: bool) -> Iterator[Estimate | EstimateBlock | BadRecord]:
     """Filter a block of steps (in one compiled call where that applies); returns True when a refusal stops the input."""
-    first = 1 if tracker.needs_step else 0  # one step by update() first tells which info keys are flags
+    if not tracker.needs_step and all(isinstance(seg, StepBlock) or len(seg.lines) == 1 for seg in block):
+        times = np.concatenate([seg.times if isinstance(seg, StepBlock) else [seg.time] for seg in block])
+        zs = np.concatenate([seg.z if isinstance(seg, StepBlock) else seg.z[None, :] for seg in block])
+        lines = np.concatenate([seg.lines if isinstance(seg, StepBlock) else seg.lines for seg in block])
+        estimates = tracker.update_block(times, zs, lines)
+        if estimates is not None:
+            yield estimates
+            return False
+        first = -1  # the sequence did not apply: step the block (update_sequence would say the same)
+    else:
+        first = 1 if tracker.needs_step else 0  # one step by update() first tells which info keys are flags
+    steps = [step for seg in block for step in (seg.steps() if isinstance(seg, StepBlock) else (seg,))]
     estimates = None
-    for i, step in enumerate(block):
+    for i, step in enumerate(steps):
         if i == first:
-            estimates = tracker.update_sequence(block[i:])
+            estimates = tracker.update_sequence(steps[i:])
             if estimates is not None:
                 break
         try:
@@ -345,7 +405,8 @@ def stream_records(
     out_of_order: str = "drop",
     stop_at_bad: bool = False,
     ready: Callable[[], bool] | None = None,
-) -> Iterator[Estimate | BadRecord | Dropped]:
+    blocks: bool = False,
+) -> Iterator[Estimate | EstimateBlock | BadRecord | Dropped]:
     """Run the model's filter over records as they arrive.
 
     Yields estimates, bad records and dropped-record notices in the order
@@ -362,7 +423,13 @@ def stream_records(
     input has more lines at hand without waiting (a live stream); a block ends
     before any read that may wait (:func:`pursuit.io.steps.mark_waits`), so no
     complete step waits for a record that has not arrived.  None: the input
-    never waits (a list, a file).
+    never waits (a list, a file), or ``items`` carries its own
+    :data:`~pursuit.io.steps.INPUT_WAITS` marks (:func:`pursuit.io.records.read_record_chunks`).
+    ``items`` may hold :class:`~pursuit.io.blocks.RecordBlock` objects; with
+    ``blocks`` the estimates of a block filtered in one compiled call come out
+    as one :class:`~pursuit.io.blocks.EstimateBlock` (for a writer's
+    :meth:`~pursuit.io.writers.EstimateWriter.write_block`), else one
+    :class:`Estimate` each.
     """
     policy = "error" if out_of_order == "sort" else out_of_order
     if ready is not None:
@@ -381,17 +448,35 @@ def stream_records(
         if model is None:
             return
     tracker = Tracker(model)
-    block: list[Step] = []
+    for event in _blocks(tracker, steps, stop_at_bad):
+        if isinstance(event, EstimateBlock) and not blocks:
+            yield from event.estimates()
+        else:
+            yield event
+
+
+def _blocks(tracker: Tracker, steps: Iterable, stop_at_bad: bool) -> Iterator[Estimate | EstimateBlock | BadRecord | Dropped]:
+    """The events of :func:`stream_records` once the tracker is set up: steps filtered in blocks."""
+    block: list[Step | StepBlock] = []
+    size = 0
     for event in steps:
-        if isinstance(event, Step):
+        if isinstance(event, StepBlock) and size + len(event) > BLOCK_STEPS:  # the part that fits, then the rest
+            while size + len(event) > BLOCK_STEPS:
+                room = BLOCK_STEPS - size
+                block.append(event.part(0, room))
+                if (yield from _filter_block(tracker, block, stop_at_bad)):
+                    return
+                block, size, event = [], 0, event.part(room, len(event))
+        if isinstance(event, (Step, StepBlock)):
             block.append(event)
-            if len(block) < BLOCK_STEPS:
+            size += len(event) if isinstance(event, StepBlock) else 1
+            if size < BLOCK_STEPS:
                 continue
         if block:  # the block is full, the input would wait, or another kind of event comes next
             if (yield from _filter_block(tracker, block, stop_at_bad)):
                 return
-            block = []
-        if isinstance(event, Step) or event is INPUT_WAITS:
+            block, size = [], 0
+        if isinstance(event, (Step, StepBlock)) or event is INPUT_WAITS:
             continue
         yield event
     if block:
