@@ -230,3 +230,9 @@ def test_whole_run_detection_edge_shapes():
     got = detect_divergence(np.ones((K, 3)), 2, mean, cov)
     np.testing.assert_array_equal(got, _monitor_flags(np.ones((K, 3)), 2, mean, cov, TEST))
     assert got[10:].all() and not got[:10].any()
+
+
+def test_whole_run_detection_with_no_step_or_no_run_and_covariances():
+    for K, batch in ((0, (3,)), (4, (0,)), (0, (5, 0)), (4, (2, 0))):
+        got = detect_divergence(np.zeros((K, *batch)), 2, np.zeros((K, *batch, 3)), np.zeros((K, *batch, 3, 3)))
+        assert got.shape == (K, *batch) and got.dtype == bool and not got.any()

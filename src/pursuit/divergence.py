@@ -228,6 +228,8 @@ def detect_divergence(
     K, batch = mean.shape[0], mean.shape[1:-1]
     test = test if test is not None else DivergenceTest()
     runs = int(np.prod(batch, dtype=np.int64))
+    if K == 0 or runs == 0:
+        return np.zeros((K, *batch), dtype=bool)  # no step or no run: nothing can diverge (reshape(..., -1) cannot size an empty array)
     # every step's verdict at once (what DivergenceMonitor.update computes step by step)
     bad = _not_finite_steps(mean.reshape(K, runs, mean.shape[-1]))
     if cov is not None:

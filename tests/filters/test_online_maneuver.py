@@ -250,3 +250,18 @@ def test_one_run_state_is_not_shared_with_the_info():
         for key in ("pred_mean", "pred_cov", "cross_cov"):
             assert not np.shares_memory(state.mean, info[key]) and not np.shares_memory(state.cov, info[key])
         assert isinstance(state, AxisState)
+
+
+def test_a_subclass_with_its_own_prediction_hook_keeps_the_general_step():
+    """A user's ``_predict`` written for the general step (seven arguments) is never handed the one-run step's eighth."""
+
+    class Damped(CurrentStatisticalFilter):
+        def _predict(self, memory, x, P, z, measured, r, T):
+            return super()._predict(memory, x, P, z, measured, r, T)
+
+    filt, ref = Damped(MEAS), CurrentStatisticalFilter(MEAS)
+    a, b = filt.init(PRIOR), ref.init(PRIOR, batch=(1,))
+    for z in _measurements()[:12]:
+        a, _ = filt.step(a, z)
+        b, _ = ref.step(b, z[None])
+        np.testing.assert_array_equal(a.mean, b.mean[0])  # the general step's bits: batch (1,) takes it too

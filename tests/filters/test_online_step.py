@@ -426,3 +426,63 @@ def test_a_sensor_without_dim_or_residual_takes_the_one_run_path():
     for z in _measurements(_filter("KF"))[:12]:
         state, info = _compare(filt, state, z, None, ())
     assert type(info) is not dict  # the lazy info of the one-run step
+
+
+def test_changing_the_innovation_in_place_does_not_change_the_lazy_nis_or_loglik():
+    filt = _filter("KF")
+    state = filt.init(pu.Gaussian(X0 + 1.0, np.diag([20.0, 2.0, 20.0, 2.0])))
+    z = _measurements(filt)[0]
+    _, want = filt.numpy_step(state, z, 1, None)
+    _, info = filt.step(state, z)
+    info["innovation"][:] = 0.0  # a caller's own use of the array it was given
+    _assert_close(info["nis"], want["nis"], "nis")
+    _assert_close(info["loglik"], want["loglik"], "loglik")
+
+
+def test_the_lazy_info_copies_and_merges_as_a_dict():
+    filt = _filter("EKF")
+    (_, info), = _steps(filt, 1)
+    want = _eager(info)
+    for got in (info.copy(), info | {}, {} | info):
+        assert type(got) is dict and list(got) == list(want)
+        for key in want:
+            np.testing.assert_array_equal(got[key], want[key], err_msg=key)
+    merged = {"nis": None, "extra": 1} | info
+    assert merged["extra"] == 1 and merged["nis"] is not None and list(merged)[:2] == ["nis", "extra"]
+    assert (info | {"extra": 2})["extra"] == 2
+
+
+def test_pickling_a_filter_drops_its_model_caches_and_the_unpickled_models_stay_read_only():
+    import pickle
+
+    filt = _filter("KF")
+    state = filt.init(pu.Gaussian(X0, np.eye(4)))
+    for dt in (None, 0.5, 2.0):
+        state, _ = filt.step(state, np.array([-120.0, 4.0]), dt=dt)
+    assert "_one_run_motion" in filt.__dict__ and "_one_run_noise" in filt.__dict__
+    back = pickle.loads(pickle.dumps(filt))
+    assert not any(name.startswith("_one_run_") for name in back.__dict__)
+    for arr in (back.measurement.R, back.motion.transition_matrix(), back.motion.cov()):
+        assert not arr.flags.writeable
+        with pytest.raises(ValueError):
+            arr[0, 0] = 1.0
+    np.testing.assert_array_equal(back.measurement.H, filt.measurement.H)
+    assert back.measurement.H.dtype == filt.measurement.H.dtype
+    lin = pu.models.LinearMotion(np.eye(2), 0.1 * np.eye(2))
+    for arr in (pickle.loads(pickle.dumps(lin)).F, pickle.loads(pickle.dumps(lin)).Q):
+        assert not arr.flags.writeable
+
+
+def test_a_writable_noise_matrix_is_read_every_step():
+    """R made writable behind the model's back (e.g. by an old pickle) is not cached: an in-place change is seen."""
+    filt = _filter("KF")
+    R = np.array(filt.measurement.R)  # writable
+    object.__setattr__(filt.measurement, "R", R)
+    state = filt.init(pu.Gaussian(X0, np.eye(4)))
+    state, _ = filt.step(state, np.array([-120.0, 4.0]))
+    assert "_one_run_noise" not in filt.__dict__
+    R *= 4.0
+    z = np.array([-119.0, 4.5])
+    _, want = filt.numpy_step(state, z, 2, None)
+    _, got = filt.step(state, z)
+    _assert_close(got["nis"], want["nis"], "nis")

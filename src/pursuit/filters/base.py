@@ -210,9 +210,11 @@ class FilterBase:
         return None if lane is None else lane(state, z, k, dt)
 
     def __getstate__(self) -> dict[str, Any]:
-        # the online lane holds compiled entry points and the last state: made again where unpickled
+        # the online lane holds compiled entry points and the last state, made again where unpickled
         state = dict(self.__dict__)
         state.pop("_online_lane", None)
+        for name in [name for name in state if name.startswith("_one_run_")]:
+            del state[name]  # the one-run step's caches of model matrices: read again from the unpickled models
         return state
 
     def _step_is_own(self) -> bool:

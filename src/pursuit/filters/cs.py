@@ -341,10 +341,12 @@ class _AxisFilter(FilterBase):
         k = state.k + 1 if k is None else int(k)
         dt = time_step(dt, k)
         T = float(self.dt if dt is None else dt)
-        if not state.batch:
+        if not state.batch and type(self)._predict.__module__ == __name__:
             # One run without a batch axis.  A batch (1,) keeps the general step: its bits must equal
             # those of the same run in a larger batch (a Monte Carlo chunk of one run, an IMM's mixture),
-            # and the one-run maths agrees with them to round-off only.
+            # and the one-run maths agrees with them to round-off only.  A subclass with its own
+            # _predict hook keeps the general step too: the one-run step passes the hook an argument
+            # (the matrices' routine) that a hook written for the general step does not take.
             return self._one_run_step(state, z, k, T)
         return self._general_step(state, z, k, T)
 

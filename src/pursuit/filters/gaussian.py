@@ -66,7 +66,7 @@ predicted mean and covariance unchanged.
 
 from __future__ import annotations
 
-from collections.abc import MutableMapping
+from collections.abc import Mapping, MutableMapping
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any, ClassVar, Iterator, NamedTuple, Sequence
@@ -503,6 +503,8 @@ class _GaussianFilter(FilterBase):
             Q = np.asarray(call_with_dt(self.motion.cov, k, dt=dt), dtype=float)
             if F.ndim != 2 or Q.ndim != 2:
                 return None
+            if F.flags.writeable or Q.flags.writeable:
+                return F, Q  # not the frozen matrices of construction: they may change, so read them every step
             if len(cache) >= _MAX_DT_CACHE:
                 cache.clear()
             got = cache[dt] = (F, Q)
@@ -521,7 +523,7 @@ class _GaussianFilter(FilterBase):
         if R.ndim != 2:
             return None
         noise = (R, small_cholesky(R), R.ravel().tolist())
-        if _fixed_noise(self.measurement):
+        if _fixed_noise(self.measurement) and not R.flags.writeable:
             object.__setattr__(self, "_one_run_noise", noise)  # per filter: not a field
         return noise
 
@@ -837,10 +839,12 @@ def _one_run_moments(
 class _Innovation:
     """S, NIS and the log-likelihood of one fully measured update, from Python floats, each made when first asked for."""
 
-    __slots__ = ("m", "nu", "s", "w", "det", "logdet", "_nis")
+    __slots__ = ("m", "nu", "v", "s", "w", "det", "logdet", "_nis")
 
     def __init__(self, m: int, nu: np.ndarray, s: list[float], w: list[list[float]], det: float | None, logdet: float | None):
         self.m, self.nu, self.s, self.w = m, nu, s, w  # s: S row by row; w: the rows of S⁻¹
+        # ν's floats now: info["innovation"] is the array nu, which a caller may change in place before reading nis
+        self.v = nu.tolist()
         self.det, self.logdet = det, logdet  # log det S is np.log(det) where logdet is None
         self._nis: float | None = None
 
@@ -848,7 +852,7 @@ class _Innovation:
         """νᵀ S⁻¹ ν."""
         nis = self._nis
         if nis is None:
-            v, w, m = self.nu.tolist(), self.w, self.m
+            v, w, m = self.v, self.w, self.m
             nis = self._nis = sum([v[i] * w[i][j] * v[j] for i in range(m) for j in range(m)])
         return nis
 
@@ -931,6 +935,17 @@ class _OneRunInfo(MutableMapping):
 
     def __reduce__(self):
         return (dict, (dict(self),))
+
+    # what a caller of the general step may do with its plain dict
+    def copy(self) -> dict[str, Any]:
+        """A plain ``dict`` with every value made."""
+        return dict(self)
+
+    def __or__(self, other: Any) -> dict[str, Any]:
+        return dict(self) | other if isinstance(other, Mapping) else NotImplemented
+
+    def __ror__(self, other: Any) -> dict[str, Any]:
+        return dict(other) | dict(self) if isinstance(other, Mapping) else NotImplemented
 
 
 _MAX_DT_CACHE = 64  # distinct dt values whose (F, Q) a filter keeps for its one-run step

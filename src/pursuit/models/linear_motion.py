@@ -48,6 +48,14 @@ class LinearMotion:
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
 
+    def __setstate__(self, state: dict) -> None:
+        # pickle gives writable arrays back: freeze them again, as __post_init__ did (filters cache F and Q on that)
+        for name, value in state.items():
+            if isinstance(value, np.ndarray):
+                value = value.copy()
+                value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
     @property
     def dim(self) -> int:
         """State dimension n."""

@@ -92,6 +92,14 @@ class _GaussianNoise:
         _freeze(self, "R", R)
         _freeze(self, "_chol_R", np.linalg.cholesky(R))
 
+    def __setstate__(self, state: dict) -> None:
+        # pickle gives writable arrays back: freeze them again, as construction did (filters cache R on that)
+        for name, value in state.items():
+            if isinstance(value, np.ndarray):
+                value = value.copy()  # its own dtype: index arrays stay integers
+                value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
 
 def _freeze(obj, name: str, arr: np.ndarray) -> None:
     arr = np.array(arr, dtype=float)
