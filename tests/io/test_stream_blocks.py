@@ -24,9 +24,9 @@ from pursuit.io import records as records_mod
 from pursuit.io import tracker as tracker_mod
 from pursuit.io.blocks import EstimateBlock, RecordBlock
 from pursuit.io.lines import ChunkedLines
-from pursuit.io.records import read_csv, read_jsonl, read_record_chunks
+from pursuit.io.records import block_records, read_csv, read_jsonl, read_record_chunks
 from pursuit.io.steps import INPUT_WAITS
-from pursuit.io.tracker import Estimate
+from pursuit.io.tracker import Estimate, block_estimates
 from pursuit.io.writers import make_writer
 
 MODEL = """\
@@ -174,7 +174,7 @@ def _expand(items) -> list:
     out = []
     for item in items:
         if isinstance(item, RecordBlock):
-            out.extend(item.records())
+            out.extend(block_records(item))
         elif item is not INPUT_WAITS:
             out.append(item)
     return out
@@ -303,4 +303,4 @@ def test_write_block_writes_the_rows_of_write(fmt):
         writer.write(Estimate(float(times[i]), means[i], var[i], float(nis[i]), dof[i], flags[i], (i + 2,), covs[i]))
     make_writer(fmt, whole, labels).write_block(block)
     assert whole.getvalue() == rows.getvalue()
-    assert [e.flags for e in block.estimates()] == flags
+    assert [e.flags for e in block_estimates(block)] == flags

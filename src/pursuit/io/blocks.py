@@ -6,7 +6,11 @@ finite numbers, times in seconds); the readers then yield one
 :class:`RecordBlock` in place of its records, :func:`pursuit.io.steps.assemble_steps`
 turns a block of strictly increasing times into a :class:`StepBlock`, the
 tracker filters it in one compiled call into an :class:`EstimateBlock`, and
-the writers format that in one string operation.  Any chunk or block that is
+the writers format that in one string operation.  The modules that own
+:class:`~pursuit.io.records.Record`, :class:`~pursuit.io.steps.Step` and
+:class:`~pursuit.io.tracker.Estimate` turn a block back into those objects
+(``block_records``, ``block_steps``, ``block_estimates``); this module
+imports none of them.  Any chunk or block that is
 not plain goes through the record-by-record path, whose messages and
 recovery rules are the reference: the blocks are a faster way to the same
 bytes, never a different result (``tests/io/test_stream_blocks.py``).
@@ -45,14 +49,6 @@ class RecordBlock:
     def __len__(self) -> int:
         return len(self.times)
 
-    def records(self) -> list[Record]:
-        """The block as :class:`~pursuit.io.records.Record` objects (the record-by-record path)."""
-        from .records import Record
-
-        return [
-            Record(line, time, sensor, tuple(vals))
-            for line, time, sensor, vals in zip(self.lines.tolist(), self.times.tolist(), self.sensors, self.values.tolist())
-        ]
 
 
 @dataclass(frozen=True)
@@ -83,14 +79,6 @@ class StepBlock:
         """Steps ``start`` to ``stop`` (views)."""
         return StepBlock(self.times[start:stop], self.z[start:stop], self.lines[start:stop], self.sensors[start:stop])
 
-    def steps(self) -> list:
-        """The block as :class:`~pursuit.io.steps.Step` objects (to be stepped one at a time)."""
-        from .steps import Step
-
-        return [
-            Step(time=t, z=z, lines=(line,), sensors=(s,))
-            for t, z, line, s in zip(self.times.tolist(), self.z, self.lines.tolist(), self.sensors)
-        ]
 
 
 @dataclass(frozen=True)
@@ -112,13 +100,3 @@ class EstimateBlock:
     def __len__(self) -> int:
         return len(self.times)
 
-    def estimates(self) -> list:
-        """The block as :class:`~pursuit.io.tracker.Estimate` objects (for ``--truth`` and ``--plot``)."""
-        from .tracker import Estimate
-
-        return [
-            Estimate(time=t, mean=self.means[i], var=self.var[i].copy(), nis=nis, dof=dof, flags=flags, lines=(line,), cov=self.covs[i])
-            for i, (t, nis, dof, flags, line) in enumerate(
-                zip(self.times.tolist(), self.nis.tolist(), self.dof, self.flags, self.lines.tolist())
-            )
-        ]

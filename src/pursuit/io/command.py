@@ -38,7 +38,7 @@ from .model import TrackModel, load_track_model
 from .output_file import same_file, same_file_as_stream, write_whole
 from .records import FORMATS, BadRecord, read_record_chunks, read_records
 from .steps import OUT_OF_ORDER, Dropped
-from .tracker import Estimate, stream_records, track_records
+from .tracker import Estimate, block_estimates, stream_records, track_records
 from .writers import OUTPUT_FORMATS, make_writer
 
 __all__ = ["add_track_parser", "run_track"]
@@ -324,7 +324,7 @@ def _stream(
             if isinstance(event, EstimateBlock):
                 writer.write_block(event)
                 if collected is not None:
-                    collected.extend(event.estimates())
+                    collected.extend(block_estimates(event))
                 written += len(event)
             elif isinstance(event, Estimate):
                 writer.write(event)

@@ -18,7 +18,20 @@ from __future__ import annotations
 from collections import deque
 from typing import BinaryIO, Callable, Iterator
 
-__all__ = ["ChunkedLines", "CHUNK_BYTES"]
+__all__ = ["ChunkedLines", "CHUNK_BYTES", "INPUT_WAITS"]
+
+
+class _InputWaits:
+    """The type of :data:`INPUT_WAITS`."""
+
+    __slots__ = ()
+
+    def __repr__(self) -> str:
+        return "INPUT_WAITS"
+
+
+INPUT_WAITS = _InputWaits()
+"""Marks the place in a live input where taking the next record would wait for more input (also :data:`pursuit.io.steps.INPUT_WAITS`)."""
 
 CHUNK_BYTES = 1 << 16
 

@@ -38,6 +38,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping
 import numpy as np
 
 from .blocks import RecordBlock
+from .lines import INPUT_WAITS
 from .input_spec import InputSpec
 
 __all__ = [
@@ -47,6 +48,7 @@ __all__ = [
     "read_jsonl",
     "read_records",
     "read_record_chunks",
+    "block_records",
     "check_record",
     "FORMATS",
 ]
@@ -712,12 +714,10 @@ def read_record_chunks(
     The records, the bad records and their messages are those of
     :func:`read_records` on the same lines (a chunk with any line that is
     not plain is read line by line).  ``ready`` as in
-    :func:`pursuit.io.steps.mark_waits`: an :data:`~pursuit.io.steps.INPUT_WAITS`
+    :func:`pursuit.io.steps.mark_waits`: an :data:`~pursuit.io.lines.INPUT_WAITS`
     mark comes before each chunk whose taking may wait (a chunk is what the
     input had at hand, see :meth:`pursuit.io.lines.ChunkedLines.chunks`).
     """
-    from .steps import INPUT_WAITS
-
     if fmt not in FORMATS:
         raise ValueError(f"format: must be one of {', '.join(FORMATS)}, got {fmt!r}")
     reader = _CsvReader(unterminated, layout) if fmt == "csv" else _JsonlReader(unterminated, layout)
@@ -761,3 +761,11 @@ def check_record(record: Record, sensors: Mapping[str, Any]) -> Record | BadReco
         if not math.isnan(v) and not lo <= v <= hi:
             return BadRecord(record.line, "value", f"{v!r} is outside the valid range [{lo:g}, {hi:g}] of sensor {record.sensor!r}")
     return record
+
+
+def block_records(block: RecordBlock) -> list[Record]:
+    """A :class:`~pursuit.io.blocks.RecordBlock` as :class:`Record` objects (for the record-by-record path)."""
+    return [
+        Record(line, time, sensor, tuple(vals))
+        for line, time, sensor, vals in zip(block.lines.tolist(), block.times.tolist(), block.sensors, block.values.tolist())
+    ]

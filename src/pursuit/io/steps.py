@@ -35,9 +35,10 @@ from typing import Any, Callable, Iterable, Iterator, Mapping
 import numpy as np
 
 from .blocks import RecordBlock, StepBlock
-from .records import BadRecord, Record, check_record
+from .lines import INPUT_WAITS
+from .records import BadRecord, Record, block_records, check_record
 
-__all__ = ["Step", "Dropped", "OUT_OF_ORDER", "INPUT_WAITS", "assemble_steps", "mark_waits", "sort_records"]
+__all__ = ["Step", "Dropped", "OUT_OF_ORDER", "INPUT_WAITS", "assemble_steps", "block_steps", "mark_waits", "sort_records"]
 
 OUT_OF_ORDER = ("sort", "drop", "error")
 
@@ -87,17 +88,6 @@ def sort_records(items: Iterable[Record | BadRecord]) -> list[Record | BadRecord
     return [*bad, *good]
 
 
-class _InputWaits:
-    """The type of :data:`INPUT_WAITS`."""
-
-    __slots__ = ()
-
-    def __repr__(self) -> str:
-        return "INPUT_WAITS"
-
-
-INPUT_WAITS = _InputWaits()
-"""Marks the place in a live input where taking the next record would wait for more input."""
 
 
 def mark_waits(items: Iterable[Any], ready: Callable[[], bool]) -> Iterator[Any]:
@@ -182,7 +172,7 @@ def assemble_steps(
                     yield steps
                 pending, pending_time = [last], last.time  # the last time stays open: a record of it may still come
                 continue
-            todo = item.records()  # the block is not plain: record by record, as the reference
+            todo = block_records(item)  # the block is not plain: record by record, as the reference
         else:
             todo = (item,)
         for rec in todo:
@@ -298,3 +288,11 @@ def _make_step(records: list[Record], sensors: Mapping[str, object], m: int) -> 
         lines=tuple(dict.fromkeys(r.line for r in records)),  # a wide CSV row gives several records
         sensors=tuple(r.sensor for r in records if r.sensor is not None),
     )
+
+
+def block_steps(block: StepBlock) -> list[Step]:
+    """A :class:`~pursuit.io.blocks.StepBlock` as :class:`Step` objects (to be stepped one at a time)."""
+    return [
+        Step(time=t, z=z, lines=(line,), sensors=(s,))
+        for t, z, line, s in zip(block.times.tolist(), block.z, block.lines.tolist(), block.sensors)
+    ]

@@ -33,9 +33,9 @@ from .initiate import initiate
 from .model import TrackModel
 from .records import BadRecord, Record
 from .blocks import EstimateBlock, StepBlock
-from .steps import INPUT_WAITS, Dropped, Step, assemble_steps, mark_waits, sort_records
+from .steps import INPUT_WAITS, Dropped, Step, assemble_steps, block_steps, mark_waits, sort_records
 
-__all__ = ["Estimate", "Tracker", "StepRefused", "TrackResult", "track_records", "stream_records", "BLOCK_STEPS"]
+__all__ = ["Estimate", "Tracker", "StepRefused", "TrackResult", "track_records", "stream_records", "block_estimates", "BLOCK_STEPS"]
 
 BLOCK_STEPS = 4096
 """The most steps :func:`stream_records` filters in one block (one compiled call where the filter has one)."""
@@ -380,7 +380,7 @@ def _filter_block(tracker: Tracker, block: list[Step | StepBlock], stop_at_bad: 
         first = -1  # the sequence did not apply: step the block (update_sequence would say the same)
     else:
         first = 1 if tracker.needs_step else 0  # one step by update() first tells which info keys are flags
-    steps = [step for seg in block for step in (seg.steps() if isinstance(seg, StepBlock) else (seg,))]
+    steps = [step for seg in block for step in (block_steps(seg) if isinstance(seg, StepBlock) else (seg,))]
     estimates = None
     for i, step in enumerate(steps):
         if i == first:
@@ -450,7 +450,7 @@ def stream_records(
     tracker = Tracker(model)
     for event in _blocks(tracker, steps, stop_at_bad):
         if isinstance(event, EstimateBlock) and not blocks:
-            yield from event.estimates()
+            yield from block_estimates(event)
         else:
             yield event
 
@@ -481,3 +481,13 @@ def _blocks(tracker: Tracker, steps: Iterable, stop_at_bad: bool) -> Iterator[Es
         yield event
     if block:
         yield from _filter_block(tracker, block, stop_at_bad)
+
+
+def block_estimates(block: EstimateBlock) -> list[Estimate]:
+    """An :class:`~pursuit.io.blocks.EstimateBlock` as :class:`Estimate` objects (for ``--truth`` and ``--plot``)."""
+    return [
+        Estimate(time=t, mean=block.means[i], var=block.var[i].copy(), nis=nis, dof=dof, flags=flags, lines=(line,), cov=block.covs[i])
+        for i, (t, nis, dof, flags, line) in enumerate(
+            zip(block.times.tolist(), block.nis.tolist(), block.dof, block.flags, block.lines.tolist())
+        )
+    ]
