@@ -324,49 +324,23 @@ def small_inv_logdet(S: np.ndarray) -> tuple[np.ndarray, float] | None:
     :func:`inv_spd` and :func:`logdet_spd`.
     """
     m = S.shape[-1]
-    s = S.ravel().tolist()
-    if m == 1:
-        a = s[0]
-        if not a > 0.0:
-            return None
-        return np.array(1.0 / a).reshape(S.shape), float(np.log(a))
-    if m == 2:
-        a, b, c, d = s
-        det = a * d - b * c
-        if not det > _CLOSED_FORM_MIN_RATIO * (a * d):
-            return None
-        inv = [d / det, -b / det, -c / det, a / det]
-    elif m == 3:
-        a00, a01, a02, a10, a11, a12, a20, a21, a22 = s
-        c00 = a11 * a22 - a12 * a21
-        c01 = a12 * a20 - a10 * a22
-        c02 = a10 * a21 - a11 * a20
-        det = a00 * c00 + a01 * c01 + a02 * c02
-        scale = _CLOSED_FORM_MIN_RATIO * (a00 * a11 * a22)
-        # logdet_spd expands the determinant along the first row in its own order: the same bits
-        det_log = a00 * (a11 * a22 - a12 * a21) - a01 * (a10 * a22 - a12 * a20) + a02 * (a10 * a21 - a11 * a20)
-        if not (det > scale and det_log > scale):
-            return None
-        inv = [
-            c00 / det, (a02 * a21 - a01 * a22) / det, (a01 * a12 - a02 * a11) / det,
-            c01 / det, (a00 * a22 - a02 * a20) / det, (a02 * a10 - a00 * a12) / det,
-            c02 / det, (a01 * a20 - a00 * a21) / det, (a00 * a11 - a01 * a10) / det,
-        ]  # fmt: skip
-    else:
+    got = small_inv_det(S.ravel().tolist(), m)
+    if got is None:
         return None
+    rows, det = got
     # np.log, not math.log: the bits of logdet_spd (NumPy's SIMD log may differ from libm's in the last bit)
-    return np.array(inv).reshape(S.shape), float(np.log(det_log if m == 3 else det))
+    return np.array(rows).reshape(S.shape), float(np.log(det))
 
 
 def small_inv_det(s: list[float], m: int) -> tuple[list[list[float]], float] | None:
     """S⁻¹ as rows of Python floats and the determinant of one SPD matrix of size 1 to 3 given as floats, or None.
 
-    ``s`` holds the ``m * m`` entries of S row by row.  The closed forms, their
-    operation order and their hand-over to LAPACK are those of
-    :func:`small_inv_logdet`, so the inverse has the same bits and
-    ``np.log(det)`` is its log det; the one-run step forms S in Python floats
-    and takes the log only when the log-likelihood is asked for.  None where
-    :func:`small_inv_logdet` returns None.
+    ``s`` holds the ``m * m`` entries of S row by row.  The closed forms of
+    :func:`small_inv_logdet` (which calls this): their operation order is that
+    of :func:`inv_spd` and :func:`logdet_spd`, so the inverse has their bits
+    and ``np.log(det)`` is the log det; the one-run step forms S in Python
+    floats and takes the log only when the log-likelihood is asked for.  None
+    where those closed forms hand over to LAPACK.
     """
     if m == 1:
         a = s[0]
