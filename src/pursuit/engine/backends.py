@@ -122,8 +122,9 @@ def _mp_context() -> multiprocessing.context.BaseContext:
     methods = multiprocessing.get_all_start_methods()
     ctx = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
     if ctx.get_start_method() == "forkserver":
-        # Workers fork from a server that has imported pursuit (and NumPy) once.
-        ctx.set_forkserver_preload(["pursuit.engine.montecarlo"])
+        # Workers fork from a server that has imported pursuit (and NumPy) once, and that ignores
+        # SIGINT first so a worker forked just before a Ctrl-C does not print a traceback.
+        ctx.set_forkserver_preload(["pursuit._forkserver_start", "pursuit.engine.montecarlo"])
     return ctx
 
 
