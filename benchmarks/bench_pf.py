@@ -59,9 +59,15 @@ from pursuit.rng import run_streams  # noqa: E402
 from pursuit.scenarios.ungm import UNGM  # noqa: E402
 
 
+# The clock of every timing here: the wall clock, or the process's CPU time with --cpu (a loaded
+# machine: pursuit's numba rows run on one thread and `particles` on one BLAS thread, so CPU time is
+# the time on one core).
+_CLOCK = time.perf_counter
+
+
 def _best(fn, repeat: int) -> float:
-    """Median wall time of ``repeat`` calls of ``fn``."""
-    return median_time(fn, repeat)
+    """Median time (``_CLOCK``) of ``repeat`` calls of ``fn``."""
+    return median_time(fn, repeat, _CLOCK)
 
 
 def _ungm_data(M: int, T: int, seed: int = 1):
@@ -70,11 +76,15 @@ def _ungm_data(M: int, T: int, seed: int = 1):
     return sc, sim
 
 
-def _threads(n):
-    if n is not None:
-        import numba
+def _threads(n) -> int | None:
+    """Set numba's thread count to ``n`` (None: leave it); return the count before, to restore."""
+    if n is None:
+        return None
+    import numba
 
-        numba.set_num_threads(n)
+    before = numba.get_num_threads()
+    numba.set_num_threads(n)
+    return before
 
 
 def bench_pursuit_pf(M: int, T: int, N: int, repeat: int, backend: str = "numpy", threads=None, scenario=None) -> float:
@@ -85,10 +95,10 @@ def bench_pursuit_pf(M: int, T: int, N: int, repeat: int, backend: str = "numpy"
         sc = scenario
         sim = sc.simulate(run_streams(1, range(M), 0), M)
     filt = pu.BootstrapParticleFilter(sc.motion, sc.measurement, particles=N, backend=backend)
-    _threads(threads)
+    before = _threads(threads)
     pu.run(filt, sim.measurements[:2], sim.prior, rng=run_streams(2, range(M), 1))  # compile / warm up
     t = _best(lambda: pu.run(filt, sim.measurements, sim.prior, rng=run_streams(2, range(M), 1)), repeat)
-    _threads(2)
+    _threads(before)  # as it was (a pinned process may have one thread only)
     return t
 
 
@@ -326,17 +336,18 @@ def main_cv(N: int = 1000, repeat: int = 5, peer_runs: int = 10) -> dict[str, An
     M, T = 100, 100
     cv = WSNRange(anchors=[[0.0, 0.0], [100.0, 0.0], [0.0, 100.0]], sigma=2.0, steps=T)
     work = M * T * N
-    peer1 = peer_runs * T * N / bench_particles_cv(cv, peer_runs, T, N, 1)
+    # The peer's first call pays its imports and first-use costs: time it as median of 3, before and after.
+    peer1 = peer_runs * T * N / bench_particles_cv(cv, peer_runs, T, N, 3)
     numba1 = work / bench_pursuit_pf(M, T, N, repeat, "numba", 1, scenario=cv)
     ungm1 = work / bench_pursuit_pf(M, T, N, repeat, "numba", 1)
-    peer2 = peer_runs * T * N / bench_particles_cv(cv, peer_runs, T, N, 1)
+    peer2 = peer_runs * T * N / bench_particles_cv(cv, peer_runs, T, N, 3)
     ref = 0.5 * (peer1 + peer2)
     print(f"Machine: {machine()}\n")
     print("| work: implementation | M particle-steps/s | vs particles | note |")
     print("|---|---|---|---|")
     print(f"| 2-D CV, 3 range anchors, N={N}: pursuit numba, 1 thread | {numba1 / 1e6:.1f} | {numba1 / ref:.1f}x | M={M} |")
     print(f"| UNGM N={N}: pursuit numba, 1 thread | {ungm1 / 1e6:.1f} | | M={M}; the 2-D path costs {ungm1 / numba1:.1f}x more per particle-step |")
-    print(f"| 2-D CV, 3 range anchors, N={N}: particles (Chopin), before / after | {peer1 / 1e6:.2f} / {peer2 / 1e6:.2f} | 1.0x | one run at a time; {peer_runs} runs |")
+    print(f"| 2-D CV, 3 range anchors, N={N}: particles (Chopin), before / after | {peer1 / 1e6:.2f} / {peer2 / 1e6:.2f} | 1.0x | one run at a time; {peer_runs} runs, median of 3 |")
     return {"cv_numba1": numba1, "ungm_numba1": ungm1, "particles": (peer1, peer2)}
 
 
@@ -345,7 +356,13 @@ if __name__ == "__main__":
     ap.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
     ap.add_argument("--repeat", type=int, default=3, help="median of this many timings")
     ap.add_argument("--cv", action="store_true", help="only the 2-D CV range-anchor rows at N = 1000, numba on one thread")
+    ap.add_argument("--cpu", action="store_true", help="time with the process's CPU time (a loaded machine; run with OPENBLAS_NUM_THREADS=1)")
     cli = ap.parse_args()
+    if cli.cpu and not cli.cv:
+        ap.error("--cpu goes with --cv: the full table has two-thread rows, whose CPU time is not the time on one core")
+    if cli.cpu:
+        _CLOCK = time.process_time
+        print("(CPU time of this process: time.process_time)\n")
     if cli.cv:
         main_cv(repeat=cli.repeat)
     else:

@@ -41,6 +41,25 @@ def test_one_core_pins_numpys_blas_to_one_thread():
     assert proc.stdout.strip() == "False"  # too late once NumPy is loaded, and it says so
 
 
+def test_the_timer_counts_cpu_time_when_told():
+    """``median_time(..., clock=time.process_time)`` leaves out time the process spends off the CPU."""
+    import time
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        from _timing import median_time
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+    assert median_time(lambda: time.sleep(0.05), 3) >= 0.05
+    assert median_time(lambda: time.sleep(0.05), 3, time.process_time) < 0.02
+
+
+def test_pf_benchmark_takes_cpu_time_only_with_its_one_thread_rows():
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_pf.py"), "--cpu"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert "--cpu goes with --cv" in proc.stderr
+
+
 @pytest.mark.slow
 def test_floor_benchmark_quick_mode():
     pytest.importorskip("numba")
