@@ -194,9 +194,19 @@ class _Lane:
         return packed
 
     def start(self, state: GaussianState) -> tuple | None:
-        """``(x, P, batch)`` of a state this lane did not return, or None for a batch other than () and (1,)."""
+        """``(x, P, batch)`` of a state this lane did not return, or None for a batch other than () and (1,).
+
+        Raises
+        ------
+        ValueError
+            Where the state's size is not the model's (for every batch: the
+            batched compiled step does not check it either).
+        """
         mean, cov = state.mean, state.cov
         n = self.n
+        if np.shape(mean)[-1:] != (n,) or np.shape(cov)[-2:] != self.nn:
+            # the compiled kernels trust their shapes (a wrong size reads past the arrays): refuse it here
+            raise ValueError(f"state: the filter's model has {n} states, got mean {np.shape(mean)} and cov {np.shape(cov)}")
         if mean.shape == (n,):
             batch = ()
         elif mean.shape == (1, n):
