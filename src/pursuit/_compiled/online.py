@@ -21,9 +21,12 @@ one run needs:
   fixes itself;
 * the returned state is a :class:`pursuit.filters.GaussianState` whose mean
   and covariance are views of one freshly allocated output (so a state is
-  never overwritten by a later step), and the info a :class:`StepInfo`, a
-  mapping with the keys of the NumPy step that slices each value on first
-  access.
+  never overwritten by a later step), built without its ``__init__``
+  (:func:`_new_state`: the kernel's arrays need no check), and the info a
+  :class:`StepInfo`, a mapping with the keys of the NumPy step that slices
+  each value on first access;
+* a state the lane did not return is checked for its size once (the kernels
+  trust their shapes); user input is never trusted, only the lane's own output.
 
 The step of a tracking loop (the state the lane returned last, no ``k`` or
 ``dt``, ``z`` a float64 vector of the run's shape) takes a fast path in
