@@ -304,3 +304,60 @@ def test_a_bad_measurement_on_the_fast_path_raises_as_on_the_general_path(batch)
         assert str(fast.value) == str(general.value) and "step 2" in str(fast.value)
     s2, info = filt.step(s, np.array([61.0, 1.01]).reshape(batch + (2,)))  # the lane goes on from s
     assert isinstance(info, StepInfo) and s2.k == 2
+
+
+@pytest.mark.parametrize("name, cls, meas", [CASES[0], CASES[3]])
+@pytest.mark.parametrize("batch", [(), (1,)])
+def test_the_lanes_states_are_ordinary_states(name, cls, meas, batch):
+    """The lane builds its states without the constructor (trusted arrays): they behave as constructed ones.
+
+    Same type and fields in the same order, the general path's array flags,
+    equal repr and fields to a state made by ``GaussianState(...)``, frozen,
+    and a pickle round trip that gives the same arrays.
+    """
+    import dataclasses
+
+    zs = _measurements(meas)
+    filt, _ = _filters(cls, meas)
+    s = filt.init(pu.Gaussian(X0, COV0), batch=batch)
+    for k in range(4):
+        s_fast, _ = filt.step(s, zs[k].reshape(batch + zs[k].shape))  # chained from the second step: the fast path
+        s_general, _ = filt.step(s, zs[k].reshape(batch + zs[k].shape), k=s.k + 1)  # k given: the general path
+        s = s_fast
+    built = pu.filters.GaussianState(mean=s.mean, cov=s.cov, k=s.k, memory=None)
+    for got in (s, s_general):
+        assert type(got) is pu.filters.GaussianState
+        assert list(vars(got)) == [f.name for f in dataclasses.fields(built)]
+        assert repr(got) == repr(pu.filters.GaussianState(mean=got.mean, cov=got.cov, k=got.k, memory=None))
+        assert got.k == 4 and got.memory is None and got.batch == batch
+        assert got.mean.shape == batch + (4,) and got.cov.shape == batch + (4, 4)
+        assert got.mean.dtype == got.cov.dtype == np.float64
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            got.k = 5
+        back = pickle.loads(pickle.dumps(got))
+        assert type(back) is type(got) and back.k == got.k and back.memory is None
+        assert np.array_equal(back.mean, got.mean) and np.array_equal(back.cov, got.cov)
+    assert np.array_equal(s.mean, s_general.mean) and np.array_equal(s.cov, s_general.cov)
+    for a, b in [(s.mean, s_general.mean), (s.cov, s_general.cov)]:
+        assert a.flags.writeable == b.flags.writeable and a.flags.c_contiguous == b.flags.c_contiguous
+        assert a.strides == b.strides
+    assert repr(s) == repr(s_general) and repr(s) == repr(built)
+
+
+@pytest.mark.parametrize("name, cls, meas", [CASES[0], CASES[3]])
+@pytest.mark.parametrize("batch", [(), (1,), (3,)])
+def test_a_state_of_the_wrong_size_is_refused(name, cls, meas, batch):
+    """A state whose size is not the model's raises a clear error (the compiled kernels would read past its arrays)."""
+    filt, ref = _filters(cls, meas)
+    z = np.array([60.0, 1.0])
+    for n in (3, 5):
+        state = pu.filters.GaussianState(mean=np.zeros(batch + (n,)), cov=np.broadcast_to(np.eye(n), batch + (n, n)))
+        with pytest.raises(ValueError, match=rf"state: the filter's model has 4 states, got mean \({', '.join(map(str, batch + (n,)))},?\)"):
+            filt.step(state, z)
+        with pytest.raises(ValueError):  # NumPy's own matrix product refuses it too
+            ref.step(state, z)
+    state = pu.filters.GaussianState(mean=np.zeros(batch + (4,)), cov=np.broadcast_to(np.eye(3), batch + (3, 3)))
+    with pytest.raises(ValueError, match="state: the filter's model has 4 states"):
+        filt.step(state, z)
+    good, _ = filt.step(filt.init(pu.Gaussian(X0, COV0), batch=batch), z)  # and the lane goes on as before
+    assert good.mean.shape == batch + (4,)

@@ -21,9 +21,12 @@ one run needs:
   fixes itself;
 * the returned state is a :class:`pursuit.filters.GaussianState` whose mean
   and covariance are views of one freshly allocated output (so a state is
-  never overwritten by a later step), and the info a :class:`StepInfo`, a
-  mapping with the keys of the NumPy step that slices each value on first
-  access.
+  never overwritten by a later step), built without its ``__init__``
+  (:func:`_new_state`: the kernel's arrays need no check), and the info a
+  :class:`StepInfo`, a mapping with the keys of the NumPy step that slices
+  each value on first access;
+* a state the lane did not return is checked for its size once (the kernels
+  trust their shapes); user input is never trusted, only the lane's own output.
 
 The step of a tracking loop (the state the lane returned last, no ``k`` or
 ``dt``, ``z`` a float64 vector of the run's shape) takes a fast path in
@@ -69,10 +72,19 @@ _new = object.__new__
 
 
 def _new_state(mean: np.ndarray, cov: np.ndarray, k: int) -> GaussianState:
-    # GaussianState is a frozen dataclass without __post_init__: filling its __dict__ is what its
-    # __init__ does (through object.__setattr__, field by field), at a third of the cost
-    s = object.__new__(GaussianState)
-    s.__dict__.update(mean=mean, cov=cov, k=k, memory=None)
+    """A :class:`GaussianState` of arrays the kernel made (trusted: no validation, none is needed).
+
+    GaussianState is a frozen dataclass without ``__post_init__``: filling its
+    ``__dict__`` in field order is what its ``__init__`` does (through
+    ``object.__setattr__``, field by field), at a fraction of the cost; item
+    assignment also saves the keyword dict that ``update`` would build.
+    """
+    s = _new(GaussianState)
+    d = s.__dict__
+    d["mean"] = mean
+    d["cov"] = cov
+    d["k"] = k
+    d["memory"] = None
     return s
 
 
@@ -172,6 +184,7 @@ class _Lane:
         self.px = rows["P"][0]
         self.pn = self.px + n * n
         self.ok_row = rows["ok"][0]
+        self.xs, self.Ps = slice(0, n), slice(self.px, self.pn)  # the fast path's views of out, made once
 
     def model(self, dt: float | None) -> tuple | None:
         """The kernel's model arguments at ``dt`` (None: the motion model's own), or None where the lane does not apply."""
@@ -184,9 +197,19 @@ class _Lane:
         return packed
 
     def start(self, state: GaussianState) -> tuple | None:
-        """``(x, P, batch)`` of a state this lane did not return, or None for a batch other than () and (1,)."""
+        """``(x, P, batch)`` of a state this lane did not return, or None for a batch other than () and (1,).
+
+        Raises
+        ------
+        ValueError
+            Where the state's size is not the model's (for every batch: the
+            batched compiled step does not check it either).
+        """
         mean, cov = state.mean, state.cov
         n = self.n
+        if np.shape(mean)[-1:] != (n,) or np.shape(cov)[-2:] != self.nn:
+            # the compiled kernels trust their shapes (a wrong size reads past the arrays): refuse it here
+            raise ValueError(f"state: the filter's model has {n} states, got mean {np.shape(mean)} and cov {np.shape(cov)}")
         if mean.shape == (n,):
             batch = ()
         elif mean.shape == (1, n):
@@ -200,25 +223,32 @@ class _Lane:
     def __call__(self, state: GaussianState, z: Any, k: int | None, dt: Any):
         # the tracking loop's step first (the state this lane returned last, the model's own k and dt, z a
         # float vector whose elements are adjacent): no branch of the general path below is needed
-        if state is self.chained and k is None and dt is None and type(z) is np.ndarray and z.dtype is _F64 \
-                and z.shape == self.zshape and z.strides[-1] == 8:
+        if state is self.chained and k is None and dt is None and type(z) is np.ndarray and z.shape == self.zshape \
+                and z.dtype is _F64 and z.strides[-1] == 8:
             out = np.empty(self.size)
             if self.batch:
                 z = z[0]
             if self.call(self.x, self.P, z, *self.packed, out):
                 no_infinite_measurement(z, state.k + 1)  # raises, naming the step (as the general path)
-            if out[self.ok_row] != 0.0 and self.gate is None:
+            if out[self.ok_row] and self.gate is None:  # ok is exactly 1.0 or 0.0: truth is the cheaper test
+                x, P = out[self.xs], out[self.Ps].reshape(self.nn)
                 new = _new(GaussianState)
-                x, P = out[:self.n], out[self.px:self.pn].reshape(self.nn)
+                d = new.__dict__  # as _new_state, inlined: a call is a tenth of this step
                 if self.batch:
-                    new.__dict__.update(mean=x.reshape(self.bx), cov=P.reshape(self.bP), k=state.k + 1, memory=None)
+                    d["mean"] = x.reshape(self.bx)
+                    d["cov"] = P.reshape(self.bP)
                 else:
-                    new.__dict__.update(mean=x, cov=P, k=state.k + 1, memory=None)
+                    d["mean"] = x
+                    d["cov"] = P
+                d["k"] = state.k + 1
+                d["memory"] = None
                 self.last = self.chained = new
                 self.x, self.P = x, P
                 return new, StepInfo(self, out, self.batch, False)
             return self.finish(out, state.k + 1, self.batch)
         return self.general(state, z, k, dt)
+
+    step = __call__  # what the filter calls (a method call costs less than calling the object)
 
     def general(self, state: GaussianState, z: Any, k: int | None, dt: Any):
         """Any step the lane takes: a state it did not return, a given ``k`` or ``dt``, any ``z``."""

@@ -385,9 +385,15 @@ class _GaussianFilter(FilterBase):
             that makes ``S``, ``nis`` and ``loglik`` when first read (the
             compiled online lane's too).
         """
-        if self._specs is not None:  # compiled: one run first tries the online lane, which validates by itself
-            lane = self.__dict__.get("_online_lane")  # made by _online_step's first call; a call saved per step
-            fast = lane(state, z, k, dt) if lane is not None else self._online_step(state, z, k, dt)
+        # compiled: one run first tries the online lane, which validates by itself; the lane is made by
+        # _online_step's first call, and looked up first (before _specs) since it is there on every later step
+        lane = self.__dict__.get("_online_lane")
+        if lane is not None:
+            fast = lane.step(state, z, k, dt)  # a method call: cheaper than calling the object (__call__)
+            if fast is not None:
+                return fast
+        elif self._specs is not None:
+            fast = self._online_step(state, z, k, dt)
             if fast is not None:
                 return fast
         k = state.k + 1 if k is None else int(k)
