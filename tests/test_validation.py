@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pursuit._validation import no_infinite_measurement, no_infinite_measurements
+from pursuit._validation import no_infinite_measurement, no_infinite_measurements, state_of_size
 
 
 def test_an_infinite_measurement_names_its_step_and_nan_passes():
@@ -84,3 +84,19 @@ def test_a_time_step_whose_fifth_power_overflows_names_the_step_and_the_limit():
     # at the limit the largest power the models take (dt⁵ of the continuous-noise CA model) is finite
     Q = ConstantAcceleration(ndim=1, q=1.0, noise="continuous").cov(1, MAX_TIME_STEP)
     assert np.all(np.isfinite(Q))
+
+
+def test_a_state_of_the_wrong_size_names_the_model_size_and_every_shape():
+    from types import SimpleNamespace
+
+    gauss = SimpleNamespace(mean=np.zeros((2, 4)), cov=np.zeros((2, 4, 4)))
+    state_of_size(gauss, 4)
+    state_of_size(gauss, None)  # a user's model that does not say its size: nothing to check
+    for n in (3, 5):
+        with pytest.raises(ValueError, match=rf"state: the filter's model has {n} states, got mean \(2, 4\), cov \(2, 4, 4\)$"):
+            state_of_size(gauss, n)
+    with pytest.raises(ValueError, match=r"got mean \(4,\), cov \(3, 3\)"):  # the covariance alone is wrong
+        state_of_size(SimpleNamespace(mean=np.zeros(4), cov=np.zeros((3, 3))), 4)
+    cloud = SimpleNamespace(particles=np.zeros((2, 50, 3)), mean=np.zeros((2, 4)), cov=np.zeros((2, 4, 4)))
+    with pytest.raises(ValueError, match=r"got mean \(2, 4\), cov \(2, 4, 4\), particles \(2, 50, 3\)"):
+        state_of_size(cloud, 4)

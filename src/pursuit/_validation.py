@@ -26,6 +26,7 @@ __all__ = [
     "model_dim",
     "measurement_for_step",
     "prior_of_size",
+    "state_of_size",
     "time_step",
     "MAX_TIME_STEP",
 ]
@@ -220,6 +221,26 @@ def prior_of_size(prior_dim: int, n: int | None, model) -> None:
             f"prior: expected {n} state components for the {type(model).__name__} motion model (mean shape (*batch, {n}), "
             f"cov (*batch, {n}, {n})), got {prior_dim}"
         )
+
+
+def state_of_size(state, n: int | None) -> None:
+    """Raise ``ValueError`` if a filter state's arrays do not hold ``n`` state components.
+
+    The compiled kernels trust their shapes: a state of another size would be
+    read past its arrays and step to a silent wrong answer.  ``state`` has
+    ``mean (*batch, n)`` and ``cov (*batch, n, n)``, and a particle state also
+    ``particles (*batch, N, n)``; ``n`` None (a user's model that does not say) checks nothing.
+    """
+    if n is None:
+        return
+    shapes = {"mean": np.shape(state.mean), "cov": np.shape(state.cov)}
+    particles = getattr(state, "particles", None)
+    if particles is not None:
+        shapes["particles"] = np.shape(particles)
+    fits = shapes["mean"][-1:] == (n,) and shapes["cov"][-2:] == (n, n) and shapes.get("particles", (n,))[-1:] == (n,)
+    if not fits:
+        got = ", ".join(f"{name} {shape}" for name, shape in shapes.items())
+        raise ValueError(f"state: the filter's model has {n} states, got {got}")
 
 
 MAX_TIME_STEP = 2.0**200

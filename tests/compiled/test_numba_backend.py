@@ -456,3 +456,30 @@ def test_a_prior_covariance_too_large_for_the_noise_is_refused_as_in_numpy(filt)
     b = pu.run(GAUSSIAN[filt](mot, MEASUREMENTS[kind], backend="numba"), zs, pu.Gaussian(prior.mean, 1e12 * np.eye(4)))
     np.linalg.cholesky(b.cov)
     assert np.all(np.nan_to_num(b.info["nis"]) >= 0)  # NaN: the step that measures nothing
+
+
+WRONG_SIZE = {
+    "pf": lambda m, h: pu.BootstrapParticleFilter(m, h, particles=30, backend="numba"),
+    "ics-pf": lambda m, h: pu.ICSPF(m, h, particles=30, backend="numba"),
+    "upf": lambda m, h: pu.PartialUPF(m, h, particles=30, fraction=0.5, backend="numba"),
+    "ukf": lambda m, h: pu.UnscentedKalmanFilter(m, h, backend="numba"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(WRONG_SIZE))
+def test_a_compiled_step_refuses_a_state_of_the_wrong_size(name):
+    """The kernels trust their shapes: a state of 3 components for a 4-state model stepped silently (the
+    compiled PF read past its arrays and returned a 3-state estimate); now a clear error, before any kernel."""
+    import dataclasses
+
+    filt = WRONG_SIZE[name](ConstantVelocity(2, q=0.5, dt=1.0), MEASUREMENTS["range"])
+    assert filt.compiled
+    prior = pu.Gaussian(np.array([10.0, 1.0, 20.0, 0.5]), np.diag([4.0, 1.0, 4.0, 1.0]))
+    state = filt.init(prior, batch=(2,), **({} if name == "ukf" else {"rng": run_streams(5, range(2), 1)}))
+    cut = {"mean": state.mean[..., :3], "cov": state.cov[..., :3, :3]}
+    if hasattr(state, "particles"):
+        cut["particles"] = state.particles[..., :3]
+    if getattr(state, "particle_cov", None) is not None:
+        cut["particle_cov"] = state.particle_cov[..., :3, :3]
+    with pytest.raises(ValueError, match=r"state: the filter's model has 4 states, got mean \(2, 3\), cov \(2, 3, 3\)"):
+        filt.step(dataclasses.replace(state, **cut), np.array([22.0, 95.0]))

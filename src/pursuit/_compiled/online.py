@@ -52,7 +52,7 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from .._validation import measurement_for_step, no_infinite_measurement, time_step
+from .._validation import measurement_for_step, no_infinite_measurement, state_of_size, time_step
 from ..filters.gating import gate_exceeded, keep_prediction
 from ..filters.gaussian import GaussianState
 from . import one_run_kernels as OS
@@ -207,9 +207,7 @@ class _Lane:
         """
         mean, cov = state.mean, state.cov
         n = self.n
-        if np.shape(mean)[-1:] != (n,) or np.shape(cov)[-2:] != self.nn:
-            # the compiled kernels trust their shapes (a wrong size reads past the arrays): refuse it here
-            raise ValueError(f"state: the filter's model has {n} states, got mean {np.shape(mean)} and cov {np.shape(cov)}")
+        state_of_size(state, n)  # the compiled kernels trust their shapes (a wrong size reads past the arrays)
         if mean.shape == (n,):
             batch = ()
         elif mean.shape == (1, n):

@@ -28,7 +28,7 @@ from typing import Any, Callable, ClassVar
 
 import numpy as np
 
-from .._validation import no_infinite_measurements
+from .._validation import model_dim, no_infinite_measurements, state_of_size
 from ..compute import compiled_implementation, compiled_specs, fallback_warning, resolve_backend
 from ..gaussian import Gaussian
 
@@ -192,7 +192,15 @@ class FilterBase:
         return compiled_implementation(self.compiled_path)
 
     def _compiled_step(self, state: Any, z: np.ndarray, k: int, dt: float | None) -> tuple[Any, dict[str, np.ndarray]]:
-        """One step by the compiled implementation (``z`` checked and broadcast)."""
+        """One step by the compiled implementation (``z`` checked and broadcast; the state's size checked here).
+
+        Raises
+        ------
+        ValueError
+            A state whose size is not the motion model's (the kernels would
+            read past its arrays and step silently).
+        """
+        state_of_size(state, model_dim(self.motion))
         return self._implementation().step(self, self._specs, state, z, k, dt)
 
     def _online_step(self, state: Any, z: Any, k: Any, dt: Any) -> tuple[Any, Any] | None:
