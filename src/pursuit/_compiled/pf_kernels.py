@@ -208,12 +208,13 @@ def _weigh_run(r, Xp, logw, logN, z, valid, sensor, thr, out, e):
     ll = np.empty(N)
     const, measured = measure_run(sensor, Xp, z[r], valid[r], Zp, ll)
     offset = np.empty(N)
-    uniform = True
+    nonzero = 0  # counted, not a flag set to literal True/False: numba would compile predictive_run for Literal[bool] too
     for i in range(N):
         o = logw[r, i] + logN
         offset[i] = o
         if o != 0.0:
-            uniform = False
+            nonzero += 1
+    uniform = nonzero == 0
     L = np.empty((m, m))
     tmp = np.empty(m)
     out.nis[r], out.dof[r] = predictive_run(sensor, Zp, offset, uniform, z[r], valid[r], out.innov[r], out.S[r], L, tmp)
