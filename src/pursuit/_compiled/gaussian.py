@@ -37,7 +37,7 @@ from . import generated, kf_codegen
 from .kernel_args import GaussOutputs, GaussSequenceOutputs, GaussUpdateOutputs, Prediction, SigmaPoints
 from .online import online_lane
 from .particle import measurement_args, use_parallel
-from .specs import M_LINEAR
+from .specs import M_LINEAR, frozen
 
 __all__ = ["gaussian_step", "gaussian_sequence", "cs_step", "lanes", "EKF", "SIGMA", "CS"]
 
@@ -70,14 +70,15 @@ def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, 
     zl = np.ascontiguousarray(np.broadcast_to(z, (*batch, m)).reshape(M, m).T)
     valid = ~np.isnan(zl)
     F, _, _ = ms.arrays(k, dt)
-    Q = np.ascontiguousarray(ms.cov(k, dt))
+    F, Q = frozen(F, np.float64), frozen(ms.cov(k, dt), np.float64)  # one read-only signature (specs.frozen)
     lam = float(filt.fading.lam)
     par = use_parallel(M)
     gen = _linear_kernels(kind, hs, F, Q)
     if gen is not None:  # one lane-major output array; the results are views of its rows
         rows = kf_codegen.step_rows(n, m)
         out = np.empty((sum(c for _, c in rows.values()), M))
-        generated.run_blocks(gen.step, (x, P, zl, valid, F, Q, lam, hs.A, hs.R, out), M, gen.STEP_BLOCK, par)
+        sensor = hs.kernel_args(k)  # A and R read-only, as in every other kernel call
+        generated.run_blocks(gen.step, (x, P, zl, valid, F, Q, lam, sensor.A, sensor.R, out), M, gen.STEP_BLOCK, par)
 
         def part(name, shape):
             first, count = rows[name]
@@ -154,7 +155,7 @@ def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_co
     if len(batch) != 1 and not (kind == "sigma" and batch == ()):
         return None
     F, _, _ = ms.arrays(1, None)
-    Q = np.ascontiguousarray(ms.cov(1, None))
+    F, Q = frozen(F, np.float64), frozen(ms.cov(1, None), np.float64)  # one read-only signature (specs.frozen)
     F2, _, _ = ms.arrays(2, None)
     if not (np.array_equal(F, F2) and np.array_equal(Q, ms.cov(2, None))):
         return None  # time-varying model: the step path evaluates it per step
@@ -178,7 +179,8 @@ def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_co
     ok = np.ones(M, dtype=np.bool_)
     gen = _linear_kernels(kind, hs, F, Q)
     if gen is not None:  # reads the measurements and writes the outputs in the track's layout, flattened per step
-        args = (x, P, np.ascontiguousarray(zs, dtype=float).reshape(K, M * m), F, Q, lam, hs.A, hs.R, keep_cov,
+        sensor = hs.kernel_args()  # A and R read-only, as in every other kernel call
+        args = (x, P, np.ascontiguousarray(zs, dtype=float).reshape(K, M * m), F, Q, lam, sensor.A, sensor.R, keep_cov,
                 means.reshape(K, M * n), covs.reshape(covs.shape[0], -1), innov.reshape(K, M * m), S.reshape(K, M * m * m),
                 nis, dof, loglik, ok)
         generated.run_blocks(gen.sequence, args, M, gen.SEQUENCE_BLOCK, use_parallel(M))
