@@ -7,7 +7,8 @@ kernel is a ``Literal`` (``0``, ``True``) rather than ``int64``/``bool``.
 The test suite's cache once held 2 to 10 signatures of the same kernels
 for these reasons (docs/testing.md, "One signature per kernel").  These tests
 pin the normalisations that make it one: the packed sensor is read-only
-whatever the model holds, and a kernel passes ``int64``/``bool`` values, not
+and the packed motion writable whatever the model holds, the Gaussian
+filters' lane-major state is writable, and a kernel passes ``int64``/``bool`` values, not
 literals, to the kernels it calls.
 """
 
@@ -47,6 +48,31 @@ def test_the_packed_sensor_has_one_numba_type_whatever_the_arrays(cls):
         assert not arr.flags.writeable and arr.flags.c_contiguous, name
         assert np.array_equal(arr, getattr(b, name)), name
     assert w.A.flags.writeable and w.R.flags.writeable, "packing leaves the spec's own arrays as they were"
+
+
+def test_the_packed_motion_has_one_numba_type_whatever_the_model_holds():
+    """F and G writable and C-contiguous, as the sequence kernels' slices of their stacks are."""
+    from pursuit._compiled.kernel_args import Motion
+    from pursuit.models import ConstantVelocity, LinearMotion
+
+    F = np.array([[1.0, 0.5], [0.0, 0.9]])
+    models = [ConstantVelocity(ndim=2, dt=1.0, q=0.01), LinearMotion(np.asfortranarray(F), 0.2 * np.eye(2))]
+    types = set()
+    for model in models:
+        packed = specs.motion_spec(model).kernel_args(1, None)
+        assert packed.F.flags.writeable and packed.G.flags.writeable and packed.F.flags.c_contiguous
+        types.add(numba.typeof(packed))
+    seq = specs.motion_spec(models[0]).sequence_args(3)
+    types.add(numba.typeof(Motion(seq.kind, seq.F[0], seq.G[0], seq.par[0])))  # what _pf_sequence hands _step_body
+    assert len(types) == 1, types
+
+
+def test_lanes_are_writable_whatever_the_state_holds():
+    from pursuit._compiled.gaussian import lanes
+
+    cov = np.broadcast_to(np.eye(3), (1, 3, 3))  # a shared covariance: a read-only view
+    P = lanes(cov, 2)
+    assert P.flags.writeable and P.flags.c_contiguous and np.array_equal(P[..., 0], np.eye(3))
 
 
 def test_frozen_copies_only_where_it_must():

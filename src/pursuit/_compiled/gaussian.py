@@ -43,10 +43,14 @@ __all__ = ["gaussian_step", "gaussian_sequence", "cs_step", "lanes", "EKF", "SIG
 
 
 def lanes(a: np.ndarray, core: int) -> np.ndarray:
-    """Lane-major contiguous copy (or the underlying array) of ``a (M, *core_shape)``: ``(*core_shape, M)``."""
+    """Lane-major contiguous copy (or the underlying array) of ``a (M, *core_shape)``: ``(*core_shape, M)``.
+
+    Always writable: a broadcast covariance is a read-only view, and numba
+    would compile the kernels once more for a read-only argument.
+    """
     order = tuple(range(1, core + 1)) + (0,)
     t = a.transpose(order)
-    return t if t.flags.c_contiguous else np.ascontiguousarray(t)
+    return t if t.flags.c_contiguous and t.flags.writeable else np.array(t, order="C")
 
 
 def _linear_kernels(kind: str, hs, F: np.ndarray, Q: np.ndarray):

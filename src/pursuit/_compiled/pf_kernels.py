@@ -953,7 +953,8 @@ def _pf_step(particles, noise, obs, draws, motion, sensor, opts, out):
     for rr in prange(X.shape[0]):
         r = np.int64(rr)  # prange counts in uint64
         ws = np.empty((max(4, lanes_rows(X.shape[2], z.shape[1])), X.shape[1]))
-        _step_body(r, X, logw, noise, z, valid, draws, motion, sensor, opts, out, False, ws)
+        known = r < 0  # False, typed bool: a literal False would compile _step_body & co. once more (Literal[bool])
+        _step_body(r, X, logw, noise, z, valid, draws, motion, sensor, opts, out, known, ws)
 
 
 def _pf_sequence(prior, noise, obs, draws, motion, sensor, opts, buffers, out, keep_cov):

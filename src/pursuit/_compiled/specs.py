@@ -94,7 +94,9 @@ class MotionSpec:
             F, G = m.F, m._G
         else:
             F, _, G = m._matrices(dt)
-        return np.ascontiguousarray(F), np.ascontiguousarray(G), np.zeros(1)
+        # writable C copies where the model's own are read-only: the sequence kernels slice F, G of
+        # writable stacks, and numba compiles a kernel once more for a read-only argument
+        return np.require(F, np.float64, ("C", "W")), np.require(G, np.float64, ("C", "W")), np.zeros(1)
 
     def cov(self, k: int, dt: float | None) -> np.ndarray:
         """Process-noise covariance Q of step ``k``."""
