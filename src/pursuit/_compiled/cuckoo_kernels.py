@@ -470,7 +470,7 @@ def mh_search_run(X, Mx, XI, F, G, normals, uniforms, search, sensor, z, valid, 
         alpha[1] = a_t
         if trend != TREND_OFF:
             fnow[0] = _other_mean(F, h, N)
-            fnow[1] = _other_mean(F, 0, h)
+            fnow[1] = _other_mean(F, np.int64(0), h)  # int64, not Literal[0]: the signature of the call above
             if t > 0:
                 for j in range(2):
                     delta = (fnow[j] - fprev[j]) / (fprev[j] + _EPS)
@@ -567,7 +567,8 @@ def _mh_run(b, particles, buffers, streams, obs, G, sensor, search, opts, pf, st
             n_valid += 1
     measured = n_valid > 0
     F = np.empty(N)
-    _fitness_rows(sensor, X, np.int64(0), N, z[b], valid[b], measured, include_const, _fit_consts(sensor.R, include_const), np.empty((N, m)), F)
+    cst = _fit_consts(sensor.R, include_const)
+    _fitness_rows(sensor, X, np.int64(0), N, z[b], valid[b], measured, include_const, cst, np.empty((N, m)), F)
     acc = 0
     if n_iter > 0:
         acc = mh_search_run(X, Mx, XI, F, G, normals[b], uniforms[b], search, sensor, z[b], valid[b], measured, include_const)
