@@ -71,7 +71,8 @@ def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, 
     cov = np.broadcast_to(state.cov, (*batch, n, n)).reshape(M, n, n)
     x = lanes(mean, 1)
     P = lanes(cov, 2)
-    zl = np.ascontiguousarray(np.broadcast_to(z, (*batch, m)).reshape(M, m).T)
+    # writable: one run's measurement broadcast is a read-only view, another signature for numba
+    zl = np.require(np.broadcast_to(z, (*batch, m)).reshape(M, m).T, requirements=("C", "W"))
     valid = ~np.isnan(zl)
     F, _, _ = ms.arrays(k, dt)
     F, Q = frozen(F, np.float64), frozen(ms.cov(k, dt), np.float64)  # one read-only signature (specs.frozen)
@@ -252,7 +253,7 @@ def measurement_correct(filt, hs, x_pred: np.ndarray, P_pred: np.ndarray, z: np.
     mean = x_pred.reshape(M, n)
     cov = np.broadcast_to(P_pred, (*batch, n, n)).reshape(M, n, n)
     zs = np.broadcast_to(z, (*batch, m)).reshape(M, m)
-    zl = np.ascontiguousarray(zs.T)
+    zl = np.require(zs.T, requirements=("C", "W"))  # writable, as in gaussian_step: one signature
     valid = ~np.isnan(zl)
     outs = GaussUpdateOutputs(np.empty((n, M)), np.empty((n, n, M)), np.empty((m, M)), np.empty((m, m, M)), np.empty(M),
                               np.empty(M, dtype=np.int64), np.empty(M), np.ones(M, dtype=np.bool_))
