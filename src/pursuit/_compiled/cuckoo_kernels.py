@@ -127,7 +127,7 @@ def _greedy(X, F, C, sensor, z, valid, measured, add, lower, upper, cst, H, Fc):
             if c > upper[j]:
                 c = upper[j]
             C[i, j] = c
-    _fitness_rows(sensor, C, 0, N, z, valid, measured, add, cst, H, Fc)
+    _fitness_rows(sensor, C, np.int64(0), N, z, valid, measured, add, cst, H, Fc)  # int64, not Literal[0]: one signature (docs/testing.md)
     acc = 0
     for i in range(N):
         fc = Fc[i]
@@ -283,12 +283,13 @@ def _cuckoo_step(particles, draws, obs, sensor, search, opts, out):
         const, measured = measure_run(sensor, Xp, z[r], valid[r], Zp, ll)
         with_prior = sequential and not state_uniform
         offset = np.zeros(N)
-        uniform = True
+        nonzero = 0  # counted, not a flag set to literal True/False: numba would compile the callee for Literal[bool] too
         if with_prior:
             for i in range(N):
                 offset[i] = logw[r, i] + logN
                 if offset[i] != 0.0:
-                    uniform = False
+                    nonzero += 1
+        uniform = nonzero == 0
         L = np.empty((m, m))
         tmp = np.empty(m)
         nis[r], dof[r] = predictive_run(sensor, Zp, offset, uniform, z[r], valid[r], innov[r], S[r], L, tmp)
@@ -303,7 +304,9 @@ def _cuckoo_step(particles, draws, obs, sensor, search, opts, out):
         add = include_const
         F = np.empty(N)
         if include_const:
-            _fitness_rows(sensor, Xp, 0, N, z[r], valid[r], measured, True, _fit_consts(sensor.R, True), np.empty((N, m)), F)
+            # include_const (True here) and np.int64(0), not literals: the signature the other callers use
+            _fitness_rows(sensor, Xp, np.int64(0), N, z[r], valid[r], measured, include_const,
+                          _fit_consts(sensor.R, include_const), np.empty((N, m)), F)
         else:
             for i in range(N):
                 F[i] = ll[i] if measured else 0.0
@@ -467,7 +470,7 @@ def mh_search_run(X, Mx, XI, F, G, normals, uniforms, search, sensor, z, valid, 
         alpha[1] = a_t
         if trend != TREND_OFF:
             fnow[0] = _other_mean(F, h, N)
-            fnow[1] = _other_mean(F, 0, h)
+            fnow[1] = _other_mean(F, np.int64(0), h)  # int64, not Literal[0]: the signature of the call above
             if t > 0:
                 for j in range(2):
                     delta = (fnow[j] - fprev[j]) / (fprev[j] + _EPS)
@@ -558,12 +561,14 @@ def _mh_run(b, particles, buffers, streams, obs, G, sensor, search, opts, pf, st
         fill_normal(addrs[b], normals[b])
         fill_random(addrs[b], uniforms[b])
     m = z.shape[1]
-    measured = False
+    n_valid = 0  # counted, not a flag set to literal True/False: numba would compile the callees for Literal[bool] too
     for j in range(m):
         if valid[b, j]:
-            measured = True
+            n_valid += 1
+    measured = n_valid > 0
     F = np.empty(N)
-    _fitness_rows(sensor, X, 0, N, z[b], valid[b], measured, include_const, _fit_consts(sensor.R, include_const), np.empty((N, m)), F)
+    cst = _fit_consts(sensor.R, include_const)
+    _fitness_rows(sensor, X, np.int64(0), N, z[b], valid[b], measured, include_const, cst, np.empty((N, m)), F)
     acc = 0
     if n_iter > 0:
         acc = mh_search_run(X, Mx, XI, F, G, normals[b], uniforms[b], search, sensor, z[b], valid[b], measured, include_const)

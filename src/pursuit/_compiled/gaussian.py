@@ -37,16 +37,20 @@ from . import generated, kf_codegen
 from .kernel_args import GaussOutputs, GaussSequenceOutputs, GaussUpdateOutputs, Prediction, SigmaPoints
 from .online import online_lane
 from .particle import measurement_args, use_parallel
-from .specs import M_LINEAR
+from .specs import M_LINEAR, frozen
 
 __all__ = ["gaussian_step", "gaussian_sequence", "cs_step", "lanes", "EKF", "SIGMA", "CS"]
 
 
 def lanes(a: np.ndarray, core: int) -> np.ndarray:
-    """Lane-major contiguous copy (or the underlying array) of ``a (M, *core_shape)``: ``(*core_shape, M)``."""
+    """Lane-major contiguous copy (or the underlying array) of ``a (M, *core_shape)``: ``(*core_shape, M)``.
+
+    Always writable: a broadcast covariance is a read-only view, and numba
+    would compile the kernels once more for a read-only argument.
+    """
     order = tuple(range(1, core + 1)) + (0,)
     t = a.transpose(order)
-    return t if t.flags.c_contiguous else np.ascontiguousarray(t)
+    return t if t.flags.c_contiguous and t.flags.writeable else np.array(t, order="C")
 
 
 def _linear_kernels(kind: str, hs, F: np.ndarray, Q: np.ndarray):
@@ -67,17 +71,19 @@ def gaussian_step(filt, specs, state: GaussianState, z: np.ndarray, k: int, dt, 
     cov = np.broadcast_to(state.cov, (*batch, n, n)).reshape(M, n, n)
     x = lanes(mean, 1)
     P = lanes(cov, 2)
-    zl = np.ascontiguousarray(np.broadcast_to(z, (*batch, m)).reshape(M, m).T)
+    # writable: one run's measurement broadcast is a read-only view, another signature for numba
+    zl = np.require(np.broadcast_to(z, (*batch, m)).reshape(M, m).T, requirements=("C", "W"))
     valid = ~np.isnan(zl)
     F, _, _ = ms.arrays(k, dt)
-    Q = np.ascontiguousarray(ms.cov(k, dt))
+    F, Q = frozen(F, np.float64), frozen(ms.cov(k, dt), np.float64)  # one read-only signature (specs.frozen)
     lam = float(filt.fading.lam)
     par = use_parallel(M)
     gen = _linear_kernels(kind, hs, F, Q)
     if gen is not None:  # one lane-major output array; the results are views of its rows
         rows = kf_codegen.step_rows(n, m)
         out = np.empty((sum(c for _, c in rows.values()), M))
-        generated.run_blocks(gen.step, (x, P, zl, valid, F, Q, lam, hs.A, hs.R, out), M, gen.STEP_BLOCK, par)
+        sensor = hs.kernel_args(k)  # A and R read-only, as in every other kernel call
+        generated.run_blocks(gen.step, (x, P, zl, valid, F, Q, lam, sensor.A, sensor.R, out), M, gen.STEP_BLOCK, par)
 
         def part(name, shape):
             first, count = rows[name]
@@ -154,7 +160,7 @@ def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_co
     if len(batch) != 1 and not (kind == "sigma" and batch == ()):
         return None
     F, _, _ = ms.arrays(1, None)
-    Q = np.ascontiguousarray(ms.cov(1, None))
+    F, Q = frozen(F, np.float64), frozen(ms.cov(1, None), np.float64)  # one read-only signature (specs.frozen)
     F2, _, _ = ms.arrays(2, None)
     if not (np.array_equal(F, F2) and np.array_equal(Q, ms.cov(2, None))):
         return None  # time-varying model: the step path evaluates it per step
@@ -178,7 +184,8 @@ def gaussian_sequence(filt, specs, state: GaussianState, zs: np.ndarray, keep_co
     ok = np.ones(M, dtype=np.bool_)
     gen = _linear_kernels(kind, hs, F, Q)
     if gen is not None:  # reads the measurements and writes the outputs in the track's layout, flattened per step
-        args = (x, P, np.ascontiguousarray(zs, dtype=float).reshape(K, M * m), F, Q, lam, hs.A, hs.R, keep_cov,
+        sensor = hs.kernel_args()  # A and R read-only, as in every other kernel call
+        args = (x, P, np.ascontiguousarray(zs, dtype=float).reshape(K, M * m), F, Q, lam, sensor.A, sensor.R, keep_cov,
                 means.reshape(K, M * n), covs.reshape(covs.shape[0], -1), innov.reshape(K, M * m), S.reshape(K, M * m * m),
                 nis, dof, loglik, ok)
         generated.run_blocks(gen.sequence, args, M, gen.SEQUENCE_BLOCK, use_parallel(M))
@@ -246,7 +253,7 @@ def measurement_correct(filt, hs, x_pred: np.ndarray, P_pred: np.ndarray, z: np.
     mean = x_pred.reshape(M, n)
     cov = np.broadcast_to(P_pred, (*batch, n, n)).reshape(M, n, n)
     zs = np.broadcast_to(z, (*batch, m)).reshape(M, m)
-    zl = np.ascontiguousarray(zs.T)
+    zl = np.require(zs.T, requirements=("C", "W"))  # writable, as in gaussian_step: one signature
     valid = ~np.isnan(zl)
     outs = GaussUpdateOutputs(np.empty((n, M)), np.empty((n, n, M)), np.empty((m, M)), np.empty((m, m, M)), np.empty(M),
                               np.empty(M, dtype=np.int64), np.empty(M), np.ones(M, dtype=np.bool_))

@@ -208,12 +208,13 @@ def _weigh_run(r, Xp, logw, logN, z, valid, sensor, thr, out, e):
     ll = np.empty(N)
     const, measured = measure_run(sensor, Xp, z[r], valid[r], Zp, ll)
     offset = np.empty(N)
-    uniform = True
+    nonzero = 0  # counted, not a flag set to literal True/False: numba would compile predictive_run for Literal[bool] too
     for i in range(N):
         o = logw[r, i] + logN
         offset[i] = o
         if o != 0.0:
-            uniform = False
+            nonzero += 1
+    uniform = nonzero == 0
     L = np.empty((m, m))
     tmp = np.empty(m)
     out.nis[r], out.dof[r] = predictive_run(sensor, Zp, offset, uniform, z[r], valid[r], out.innov[r], out.S[r], L, tmp)
@@ -952,7 +953,8 @@ def _pf_step(particles, noise, obs, draws, motion, sensor, opts, out):
     for rr in prange(X.shape[0]):
         r = np.int64(rr)  # prange counts in uint64
         ws = np.empty((max(4, lanes_rows(X.shape[2], z.shape[1])), X.shape[1]))
-        _step_body(r, X, logw, noise, z, valid, draws, motion, sensor, opts, out, False, ws)
+        known = r < 0  # False, typed bool: a literal False would compile _step_body & co. once more (Literal[bool])
+        _step_body(r, X, logw, noise, z, valid, draws, motion, sensor, opts, out, known, ws)
 
 
 def _pf_sequence(prior, noise, obs, draws, motion, sensor, opts, buffers, out, keep_cov):

@@ -48,7 +48,7 @@ from ..models.sensors import ObserverBearings
 from ..models.ungm import UNGMMeasurement, UNGMMotion
 from .kernel_args import Motion, Sensor
 
-__all__ = ["MotionSpec", "MeasurementSpec", "motion_spec", "measurement_spec", "MOTIONS", "MEASUREMENTS"]
+__all__ = ["MotionSpec", "MeasurementSpec", "frozen", "motion_spec", "measurement_spec", "MOTIONS", "MEASUREMENTS"]
 
 # motion kinds (model_math dispatches on them; compiled code freezes them as constants)
 LINEAR = 0
@@ -94,7 +94,9 @@ class MotionSpec:
             F, G = m.F, m._G
         else:
             F, _, G = m._matrices(dt)
-        return np.ascontiguousarray(F), np.ascontiguousarray(G), np.zeros(1)
+        # writable C copies where the model's own are read-only: the sequence kernels slice F, G of
+        # writable stacks, and numba compiles a kernel once more for a read-only argument
+        return np.require(F, np.float64, ("C", "W")), np.require(G, np.float64, ("C", "W")), np.zeros(1)
 
     def cov(self, k: int, dt: float | None) -> np.ndarray:
         """Process-noise covariance Q of step ``k``."""
@@ -165,7 +167,24 @@ class MeasurementSpec:
             if k is None:
                 raise ValueError("k: a moving observer's sensor is packed per step")
             A = np.asarray(self.observer.observer_at(k), dtype=float).reshape(1, -1)
-        return Sensor(self.kind, A, self.idx, self.scale, self.R, self.angle)
+        return Sensor(
+            int(self.kind), frozen(A, np.float64), frozen(self.idx, np.int64), float(self.scale),
+            frozen(self.R, np.float64), bool(self.angle),
+        )
+
+
+def frozen(a: np.ndarray, dtype: type) -> np.ndarray:
+    """A read-only, C-contiguous view of ``a`` as ``dtype`` (a copy only where the layout or dtype differ).
+
+    numba types a read-only array apart from a writable one, and compiles a
+    kernel again for every combination it meets: a model's own arrays are
+    often read-only (``R``, anchors), a step's observer position or a built
+    ``R`` is not.  Packing every sensor array read-only gives each kernel one
+    signature; the kernels only read them, so the bits are the same.
+    """
+    view = np.ascontiguousarray(a, dtype=dtype).view()
+    view.flags.writeable = False
+    return view
 
 
 def motion_spec(motion: Any) -> MotionSpec | str:

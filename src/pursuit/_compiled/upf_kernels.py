@@ -460,12 +460,12 @@ def _upf_run(r, X, P, logw, z, valid, draws, motion, sensor, upf, opts, pf, Pout
         propagate_point(mk, F, G, par, Xg, j, noise, Xp, n_u + j)
     # -- weigh: offset = log w_{k−1} + log N (in the new order), plus p/q for the UKF group
     offset = np.empty(N)
-    uniform = True
+    nonzero = 0  # counted, not a flag set to literal True/False: numba would compile predictive_run for Literal[bool] too
     for i in range(N):
         o = 0.0 if upf.uniform else logw[r, order[i]] + logN
         offset[i] = o
         if o != 0.0:
-            uniform = False
+            nonzero += 1
     Zp = np.empty((N, m))
     ll = np.empty(N)
     const, measured = measure_run(sensor, Xp, z[r], valid[r], Zp, ll)
@@ -485,10 +485,10 @@ def _upf_run(r, X, P, logw, z, valid, draws, motion, sensor, upf, opts, pf, Pout
         shift = math.log(sew) - logN
         for i in range(N):
             pred[i] = (offset[i] - t0) - shift
-        uniform = False
     else:
         for i in range(N):
             pred[i] = offset[i]
+    uniform = nonzero == 0 and n_u == 0  # the UKF group's p/q makes the weights non-uniform
     Ls = np.empty((m, m))
     tmp = np.empty(m)
     pf.nis[r], pf.dof[r] = predictive_run(sensor, Zp, pred, uniform, z[r], valid[r], pf.innov[r], pf.S[r], Ls, tmp)
