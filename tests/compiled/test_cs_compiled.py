@@ -154,3 +154,21 @@ def test_compiled_without_a_warning_and_the_others_still_warn():
     with pytest.warns(CompiledBackendWarning, match="ObserverBearings.*moving observer"):
         pf = pu.BootstrapParticleFilter(cv, angles, particles=10, backend="numba")
     assert not pf.compiled
+
+
+@pytest.mark.parametrize("update", ["ekf", "ukf"])
+def test_the_compiled_step_checks_the_state_size_against_the_axes(update):
+    """The nonlinear CS filter has no motion model: its state is 3 x axes (6 for bearings in 2-D), which a
+    compiled step accepts and a 5-component state is refused with a clear error (the kernels trust shapes)."""
+    import dataclasses
+
+    sc = BearingsOnlyTarget(dims=2)
+    filt = NonlinearCSFilter(sc.measurement, update=update, backend="numba")
+    assert filt.compiled and filt.axes == 2
+    state = filt.init(pu.Gaussian(np.array([1000.0, 5.0, 0.0, 2000.0, -3.0, 0.0]), np.eye(6) * 100.0), batch=(2,))
+    z = np.full((2, 1), 0.5)
+    good, _ = filt.step(state, z)
+    assert good.mean.shape == (2, 6)
+    cut = dataclasses.replace(state, mean=state.mean[..., :5], cov=state.cov[..., :5, :5])
+    with pytest.raises(ValueError, match=r"state: the filter's model has 6 states, got mean \(2, 5\), cov \(2, 5, 5\)"):
+        filt.step(cut, z)

@@ -1,7 +1,7 @@
 """Backends: local processes give the serial bits, survive a killed worker, report progress."""
 
+import multiprocessing
 import pickle
-import subprocess
 import sys
 import warnings
 
@@ -184,32 +184,35 @@ def test_workers_compute_on_one_thread_each():
     assert {name: os.environ.get(name) for name in WORKER_THREAD_ENV} == before
 
 
-def _sigint_handler() -> str:
-    """In a worker: what SIGINT does there, before any initializer of pursuit's has run."""
+def _report_sigint_handler(queue) -> None:
+    """In a child: what SIGINT does there, before any initializer of pursuit's has run."""
     import signal
 
     handler = signal.getsignal(signal.SIGINT)
-    return "ignored" if handler is signal.SIG_IGN else repr(handler)
+    queue.put("ignored" if handler is signal.SIG_IGN else "default" if handler is signal.default_int_handler else repr(handler))
 
 
-def test_workers_ignore_ctrl_c_from_their_first_instruction():
+def _sigint_handler_of_child(ctx, make) -> str:
+    queue = ctx.SimpleQueue()
+    proc = make(target=_report_sigint_handler, args=(queue,))
+    proc.start()
+    try:
+        return queue.get()
+    finally:
+        proc.join(30)
+
+
+def test_workers_ignore_ctrl_c_from_their_first_instruction_and_other_processes_keep_it():
     """A Ctrl-C that reaches a worker still in multiprocessing's bootstrap (before ``_worker_init``) must not
-    print a KeyboardInterrupt traceback (a flaky CLI test caught one): the forkserver hands its children SIGINT
-    ignored.  Asked here of a plain pool worker, which has no initializer of pursuit's."""
-    from pursuit.engine.backends import _mp_context
+    print a KeyboardInterrupt traceback (a flaky CLI test caught one): pursuit's workers ignore SIGINT from
+    the first line of their bootstrap.  A process of the user's from the same start method, started after
+    pursuit's, keeps Python's default handler (Ctrl-C still stops it)."""
+    from pursuit.engine.backends import _mp_context, _RecordingContext
 
     ctx = _mp_context()
-    if ctx.get_start_method() != "forkserver":
-        pytest.skip("workers start with spawn here: each one sets SIGINT up in its initializer")
-    with ctx.Pool(1) as pool:
-        assert pool.apply(_sigint_handler) == "ignored"
-
-
-def test_the_forkserver_start_module_leaves_other_processes_alone():
-    """Imported anywhere but in a forkserver (here a ``python -c`` process), it leaves Ctrl-C as it was."""
-    code = "import signal, pursuit._forkserver_start; print(signal.getsignal(signal.SIGINT) is signal.default_int_handler)"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "True"
+    ours = _RecordingContext(ctx)
+    assert _sigint_handler_of_child(ctx, ours.Process) == "ignored"
+    assert _sigint_handler_of_child(ctx, multiprocessing.get_context(ctx.get_start_method()).Process) == "default"
 
 
 def test_interrupt_stops_the_workers_without_waiting_for_their_chunks(tmp_path):

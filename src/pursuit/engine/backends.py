@@ -122,9 +122,8 @@ def _mp_context() -> multiprocessing.context.BaseContext:
     methods = multiprocessing.get_all_start_methods()
     ctx = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
     if ctx.get_start_method() == "forkserver":
-        # Workers fork from a server that has imported pursuit (and NumPy) once, and that ignores
-        # SIGINT first so a worker forked just before a Ctrl-C does not print a traceback.
-        ctx.set_forkserver_preload(["pursuit._forkserver_start", "pursuit.engine.montecarlo"])
+        # Workers fork from a server that has imported pursuit (and NumPy) once.
+        ctx.set_forkserver_preload(["pursuit.engine.montecarlo"])
     return ctx
 
 
@@ -177,6 +176,37 @@ def _worker_init() -> None:
 _TERMINATE_GRACE_S = 2.0
 
 
+class _IgnoresCtrlC:
+    """A worker process that ignores SIGINT from the first line of its bootstrap.
+
+    Ctrl-C in a terminal reaches every process of the group.  A worker
+    ignores it from its initializer on (:func:`_worker_init`), but one still
+    in ``multiprocessing``'s bootstrap would print a ``KeyboardInterrupt``
+    traceback of its own.  Set first thing in ``_bootstrap``, no such window
+    is left: a SIGINT before it ends the child before the bootstrap's
+    traceback printer is entered (silently: the forkserver's and spawn's own
+    code exit on it).  Only pursuit's workers are this class; other
+    processes of the same forkserver (the user's) keep Python's default.
+    """
+
+    def _bootstrap(self, *args: Any, **kwargs: Any) -> int:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        return super()._bootstrap(*args, **kwargs)  # type: ignore[misc]
+
+
+class _SpawnWorker(_IgnoresCtrlC, multiprocessing.context.SpawnProcess):
+    pass
+
+
+_WORKER_CLASSES: dict[type, type] = {multiprocessing.context.SpawnProcess: _SpawnWorker}
+if hasattr(multiprocessing.context, "ForkServerProcess"):  # POSIX
+
+    class _ForkServerWorker(_IgnoresCtrlC, multiprocessing.context.ForkServerProcess):
+        pass
+
+    _WORKER_CLASSES[multiprocessing.context.ForkServerProcess] = _ForkServerWorker
+
+
 class _RecordingContext:
     """A multiprocessing context that remembers every process it makes, before it starts.
 
@@ -196,7 +226,8 @@ class _RecordingContext:
         return getattr(self._ctx, name)
 
     def Process(self, *args: Any, **kwargs: Any) -> Any:  # noqa: N802 - the context's own name
-        proc = self._ctx.Process(*args, **kwargs)
+        cls = _WORKER_CLASSES.get(self._ctx.Process, self._ctx.Process)  # pursuit's workers ignore Ctrl-C at once
+        proc = cls(*args, **kwargs)
         self.made.append(proc)
         return proc
 

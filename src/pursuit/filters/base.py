@@ -200,8 +200,16 @@ class FilterBase:
             A state whose size is not the motion model's (the kernels would
             read past its arrays and step silently).
         """
-        state_of_size(state, model_dim(self.motion))
+        state_of_size(state, self._state_dim())
         return self._implementation().step(self, self._specs, state, z, k, dt)
+
+    def _state_dim(self) -> int | None:
+        """The number of state components this filter's state holds (None: not known).
+
+        The motion model's ``dim``; a filter whose state is not a motion
+        model's (the nonlinear CS filter's, ``3 * axes``) says its own.
+        """
+        return model_dim(getattr(self, "motion", None))
 
     def _online_step(self, state: Any, z: Any, k: Any, dt: Any) -> tuple[Any, Any] | None:
         """One step of one run by the compiled implementation's online lane, or None where it does not apply.

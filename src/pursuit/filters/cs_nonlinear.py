@@ -226,6 +226,10 @@ class NonlinearCSFilter(FilterBase):
         """Degrees of freedom of the residual statistic D: the measurement dimension m."""
         return int(np.shape(self.measurement.cov(None))[-1])
 
+    def _state_dim(self) -> int:
+        """``3 * axes``: the stacked ``[x, vx, ax, y, ...]`` state (there is no motion model to ask)."""
+        return 3 * self.axes
+
     def _infer_axes(self) -> int:
         A = self.axes
         idx = getattr(self.measurement, "position_indices", None)
