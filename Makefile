@@ -12,7 +12,7 @@ PYTEST_ARGS ?=
 
 help:
 	@echo "make demo   reproduce every experiment under experiments/ into results/"
-	@echo "make test   run the test suite but the tests marked slow (13-17 min on two cores from a clean clone)"
+	@echo "make test   run the test suite but the tests marked slow (12-17 min on two cores from a clean clone)"
 	@echo "make test-slow   run the tests marked slow: whole reproductions, benchmark scripts, million-step and many-run checks"
 	@echo "make test-all   make test, then make test-slow"
 	@echo "make test-avx2-paths   on an AVX-512 CPU, rerun the compiled, cross-check and robustness tests on NumPy's AVX2 paths"
