@@ -183,10 +183,12 @@ class _IgnoresCtrlC:
     ignores it from its initializer on (:func:`_worker_init`), but one still
     in ``multiprocessing``'s bootstrap would print a ``KeyboardInterrupt``
     traceback of its own.  Set first thing in ``_bootstrap``, no such window
-    is left: a SIGINT before it ends the child before the bootstrap's
-    traceback printer is entered (silently: the forkserver's and spawn's own
-    code exit on it).  Only pursuit's workers are this class; other
-    processes of the same forkserver (the user's) keep Python's default.
+    is left with ``forkserver``: a SIGINT before it ends the child before the
+    bootstrap's traceback printer is entered, and the forkserver's own code
+    exits on it silently.  With ``spawn`` (where there is no forkserver, e.g.
+    Windows), a SIGINT during the new interpreter's start-up can still print
+    one.  Only pursuit's workers are this class; other processes of the same
+    forkserver (the user's) keep Python's default.
     """
 
     def _bootstrap(self, *args: Any, **kwargs: Any) -> int:
