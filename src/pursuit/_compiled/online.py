@@ -25,8 +25,11 @@ one run needs:
   (:func:`_new_state`: the kernel's arrays need no check), and the info a
   :class:`StepInfo`, a mapping with the keys of the NumPy step that slices
   each value on first access;
-* a state the lane did not return is checked for its size once (the kernels
-  trust their shapes); user input is never trusted, only the lane's own output.
+* a state the lane did not return is taken only where its shapes are the
+  model's (``(n,)`` and ``(n, n)``, or with a batch axis of 1); any other
+  goes back to the filter's compiled step, which refuses a wrong size
+  (:meth:`pursuit.filters.base.FilterBase._compiled_step`): user input is
+  never trusted, only the lane's own output.
 
 The step of a tracking loop (the state the lane returned last, no ``k`` or
 ``dt``, ``z`` a float64 vector of the run's shape) takes a fast path in
@@ -52,7 +55,7 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from .._validation import measurement_for_step, no_infinite_measurement, state_of_size, time_step
+from .._validation import measurement_for_step, no_infinite_measurement, time_step
 from ..filters.gating import gate_exceeded, keep_prediction
 from ..filters.gaussian import GaussianState
 from . import one_run_kernels as OS
@@ -199,15 +202,12 @@ class _Lane:
     def start(self, state: GaussianState) -> tuple | None:
         """``(x, P, batch)`` of a state this lane did not return, or None for a batch other than () and (1,).
 
-        Raises
-        ------
-        ValueError
-            Where the state's size is not the model's (for every batch: the
-            batched compiled step does not check it either).
+        None too for shapes that are not the model's: the filter's compiled
+        step then refuses the state with its size named (the kernels trust
+        their shapes, so a wrong size must never reach them from here).
         """
         mean, cov = state.mean, state.cov
         n = self.n
-        state_of_size(state, n)  # the compiled kernels trust their shapes (a wrong size reads past the arrays)
         if mean.shape == (n,):
             batch = ()
         elif mean.shape == (1, n):
