@@ -237,6 +237,36 @@ def test_streak_equals_the_divergence_monitor(seed):
     assert any(want) and not all(want)  # it was flagged during the run, not from the start
 
 
+@pytest.mark.parametrize("seed", range(5))
+def test_streak_of_a_block_equals_step_by_step(seed):
+    # update_many (array operations, used per block) against update (one step at a time), over blocks of random
+    # sizes, so a streak runs across a block's edge and a block starts flagged
+    rng = np.random.default_rng(seed)
+    test = DivergenceTest(streak=4)
+    one, many = tracker_mod._Streak(test), tracker_mod._Streak(test)
+    K = 600
+    dof = rng.choice([0, 1, 2, 3], size=K, p=[0.15, 0.3, 0.45, 0.1])
+    nis = rng.chisquare(np.maximum(dof, 1)) * rng.choice([1.0, 1e3], size=K, p=[0.6, 0.4])
+    nis[rng.random(K) < 0.05] = np.nan
+    nis[rng.random(K) < 0.02] = np.inf
+    want = [one.update(float(nis[i]), int(dof[i])) for i in range(K)]
+    cuts = np.sort(rng.choice(np.arange(1, K), size=40, replace=False)).tolist()
+    got = []
+    for a, b in zip([0, *cuts], [*cuts, K]):
+        got.extend(many.update_many(nis[a:b], dof[a:b].tolist()).tolist())
+        assert (many.length, many.flagged) == _streak_after(test, nis[:b], dof[:b])  # the state carried to the next block
+    assert got == want
+    assert any(want) and not all(want)
+    assert many.update_many(np.empty(0), []).tolist() == []
+
+
+def _streak_after(test, nis, dof):
+    s = tracker_mod._Streak(test)
+    for a, b in zip(nis.tolist(), dof.tolist()):
+        s.update(a, b)
+    return s.length, s.flagged
+
+
 # --------------------------------------------------------------------------
 # the benchmark's input
 # --------------------------------------------------------------------------

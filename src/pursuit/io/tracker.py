@@ -206,8 +206,7 @@ class Tracker:
             return None
         means, covs, var, nis, dof, flag_rows = result
         n = len(times)
-        nis_list = nis.tolist()
-        diverged = self.monitor.update_many(nis_list, dof)
+        diverged = self.monitor.update_many(nis, dof)
         flags: list[tuple[str, ...]] = [()] * n
         marked = np.zeros(n, dtype=bool)
         for row in flag_rows:
@@ -291,9 +290,37 @@ class _Streak:
             self.flagged = True
         return self.flagged
 
-    def update_many(self, nis: list[float], dof: list[int]) -> list[bool]:
-        """:meth:`update` over consecutive steps; whether the run is flagged after each."""
-        return [self.update(a, b) for a, b in zip(nis, dof)]
+    def update_many(self, nis: np.ndarray, dof: list[int]) -> np.ndarray:
+        """:meth:`update` over consecutive steps, as array operations; whether the run is flagged after each.
+
+        The same counts as :meth:`update` step by step (integers and the same
+        comparison, so no rounding can differ): a measured step over its
+        threshold lengthens the streak, a measured step within it ends it, an
+        unmeasured step leaves it; the run is flagged from the first step whose
+        streak reaches ``test.streak`` on.
+        """
+        nis = np.asarray(nis, dtype=float)
+        dofs = np.asarray(dof, dtype=np.int64)
+        n = len(nis)
+        measured = (dofs > 0) & ~np.isnan(nis)
+        limits = np.full(n, np.inf)
+        for k in np.unique(dofs[measured]).tolist():
+            limit = self._thresholds.get(k)
+            if limit is None:
+                limit = self._thresholds[k] = float(self.test.thresholds(np.asarray([float(k)]))[0])
+            limits[dofs == k] = limit
+        over = measured & ~(nis <= limits)  # +inf exceeds, as in update
+        ends = measured & ~over
+        count = np.cumsum(over)
+        # the streak after step i: the steps over since the last step that ended it (or since the block began, on
+        # top of the length carried in)
+        last_end = np.maximum.accumulate(np.where(ends, np.arange(n), -1))
+        since = np.where(last_end >= 0, count[np.maximum(last_end, 0)], -self.length)
+        length = count - since
+        flagged = np.logical_or.accumulate((length >= self.test.streak) | self.flagged)
+        if n:
+            self.length, self.flagged = int(length[-1]), bool(flagged[-1])
+        return flagged
 
 
 def _initiation_estimate(step: Step, g, flags: tuple[str, ...]) -> Estimate:
