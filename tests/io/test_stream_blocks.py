@@ -304,3 +304,47 @@ def test_write_block_writes_the_rows_of_write(fmt):
     make_writer(fmt, whole, labels).write_block(block)
     assert whole.getvalue() == rows.getvalue()
     assert [e.flags for e in block_estimates(block)] == flags
+
+
+AWKWARD = [-0.0, 0.0, 1e-300, -1e-300, 1e300, 5e-324, 2.2250738585072014e-308, 3.0, -7.0, 2.0**53, 2.0**53 + 2, 1e16, 1e15, 1e-4, 1e-5,
+           0.1 + 0.2, 1 / 3, 123456789.0, 1.7976931348623157e308]
+
+
+@pytest.mark.parametrize("fmt", ["csv", "jsonl"])
+def test_write_block_writes_the_rows_of_write_on_awkward_values(fmt):
+    # the values whose text is easiest to get wrong (signed zero, subnormals, the edges of repr's exponent
+    # notation, integral floats), runs of rows that differ in dof, flags and a NaN NIS, and '%' in a label
+    # and in a flag (the block's row format must write them as text)
+    rng = np.random.default_rng(11)
+    n, d = 400, 2
+    means = rng.choice(AWKWARD, size=(n, d)) * rng.choice([1.0, -1.0], size=(n, d))
+    var = rng.choice([v for v in AWKWARD if v > 0], size=(n, d))
+    nis = rng.choice(AWKWARD, size=n)
+    nis[rng.random(n) < 0.1] = math.nan
+    if fmt == "csv":  # CSV writes repr of any float (JSON Lines refuses these in _format, and a block never holds them)
+        means[5, 0], var[6, 1], nis[8] = math.inf, math.nan, -math.inf
+    times = np.cumsum(rng.choice([1e-300, 5e-324, 3.0, 1 / 3, 0.1 + 0.2, 1e-5, 1e15, 2.0**53], size=n)) + 0.5
+    times[:3] = [1e-300, 1.0, 3.0]
+    dof = rng.choice([0, 1, 2, 2, 2, 2], size=n).tolist()
+    names = [(), (), (), ("predict",), ("gated", "diverged"), ("10%",), ("%s%%",)]
+    flags = [names[k] for k in rng.choice(len(names), size=n)]
+    flags[100:250] = [("diverged",)] * 150  # a long run of flagged rows
+    dof[100:250] = [2] * 150
+    block = EstimateBlock(times, means, var, nis, dof, flags, np.arange(n) + 2, np.zeros((n, d, d)))
+    labels = ["x%", "%(y)s"]
+    rows, whole = io.StringIO(), io.StringIO()
+    writer = make_writer(fmt, rows, labels)
+    for i in range(n):
+        writer.write(Estimate(float(times[i]), means[i], var[i], float(nis[i]), dof[i], flags[i], (i + 2,), block.covs[i]))
+    make_writer(fmt, whole, labels).write_block(block)
+    assert whole.getvalue() == rows.getvalue()
+    assert "-0.0" in whole.getvalue() and "5e-324" in whole.getvalue() and "1e+300" in whole.getvalue()
+    # one row and no rows: the header (CSV) and that row, the header alone
+    head = io.StringIO()
+    make_writer(fmt, head, labels).start()
+    first = rows.getvalue()[len(head.getvalue()) :].splitlines(keepends=True)[0]
+    for k, want in [(1, head.getvalue() + first), (0, head.getvalue())]:
+        out = io.StringIO()
+        part = EstimateBlock(times[:k], means[:k], var[:k], nis[:k], dof[:k], flags[:k], block.lines[:k], block.covs[:k])
+        make_writer(fmt, out, labels).write_block(part)
+        assert out.getvalue() == want

@@ -56,23 +56,54 @@ class EstimateWriter:
     def _format(self, est: Estimate) -> str:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def _format_block(self, block: EstimateBlock) -> str:  # pragma: no cover - abstract
+    def _format_block(self, block: EstimateBlock) -> str:
+        """The block's rows: one ``%`` per run of rows alike in everything but their floats (usually the whole block).
+
+        The floats of a row (time, mean, variances, NIS) come from one array's
+        ``tolist()``, so ``%r`` writes each as ``repr`` of a Python float, the
+        text :meth:`_format` writes; what else a row holds (dof, flags, and in
+        JSON Lines whether the NIS is ``null``) is written into the run's row
+        format as text.
+        """
+        n = len(block)
+        if n == 0:
+            return ""
+        floats = np.column_stack([block.times, block.means, block.var, block.nis]).astype(float, copy=False)
+        per_row = floats.shape[1]
+        flat = floats.ravel().tolist()
+        keys = self._row_keys(block)
+        rows: dict = {}
+        parts = []
+        for start, stop in _runs(keys):
+            key = keys[start]
+            row = rows.get(key)
+            if row is None:
+                row = rows[key] = self._row_format(*key)
+            parts.append((row * (stop - start)) % tuple(flat[start * per_row : stop * per_row]))
+        return "".join(parts)
+
+    def _row_keys(self, block: EstimateBlock) -> list[tuple]:
+        """Per row, what :meth:`_row_format` needs: ``(dof, flags)``."""
+        return list(zip(block.dof, block.flags))
+
+    def _row_format(self, dof: int, flags: tuple[str, ...], *rest) -> str:  # pragma: no cover - abstract
+        """A ``%`` format of one row that takes its floats (time, mean, variances, NIS) in that order."""
         raise NotImplementedError
 
-    def _cells(self, block: EstimateBlock, nis: list) -> list:
-        """The block's row values in row order: time, mean, var, ``nis`` (given), dof, flags (Python objects)."""
-        n, d = block.means.shape
-        cells = np.empty((n, 2 * d + 4), dtype=object)
-        cells[:, 0] = block.times.tolist()  # tolist(): Python floats, whose %r is repr (the shortest round-trip text)
-        cells[:, 1 : d + 1] = block.means.tolist()
-        cells[:, d + 1 : 2 * d + 1] = block.var.tolist()
-        cells[:, 2 * d + 1] = nis
-        cells[:, 2 * d + 2] = block.dof
-        cells[:, 2 * d + 3] = self._flag_texts(block.flags)
-        return cells.ravel().tolist()
 
-    def _flag_texts(self, flags: list[tuple[str, ...]]) -> list[str]:  # pragma: no cover - abstract
-        raise NotImplementedError
+def _runs(keys: list) -> list[tuple[int, int]]:
+    """``(start, stop)`` of each run of equal consecutive keys."""
+    if not keys:
+        return []
+    if keys.count(keys[0]) == len(keys):  # the usual block: one run (count compares in C)
+        return [(0, len(keys))]
+    cuts = [i for i in range(1, len(keys)) if keys[i] != keys[i - 1]]
+    return list(zip([0, *cuts], [*cuts, len(keys)]))
+
+
+def _literal(text: str) -> str:
+    """``text`` as it must stand in a ``%`` format to come out unchanged."""
+    return text.replace("%", "%%")
 
 
 class CsvEstimateWriter(EstimateWriter):
@@ -90,14 +121,9 @@ class CsvEstimateWriter(EstimateWriter):
         nums = [float(est.time), *est.mean.tolist(), *est.var.tolist(), float(est.nis)]
         return ",".join([*map(repr, nums), str(est.dof), ";".join(est.flags)]) + "\n"
 
-    def _format_block(self, block: EstimateBlock) -> str:
-        # one format string for the block: %r of a Python float is its repr, as in _format
-        d = len(self.labels)
-        row = "%r," * (2 * d + 2) + "%d,%s\n"
-        return (row * len(block)) % tuple(self._cells(block, block.nis.tolist()))
-
-    def _flag_texts(self, flags: list[tuple[str, ...]]) -> list[str]:
-        return [";".join(f) for f in flags]
+    def _row_format(self, dof: int, flags: tuple[str, ...], *rest) -> str:
+        # %r of a Python float is its repr, as in _format; dof and flags as _format writes them
+        return "%r," * (2 * len(self.labels) + 2) + _literal(f"{dof},{';'.join(flags)}\n")
 
 
 class JsonlEstimateWriter(EstimateWriter):
@@ -114,16 +140,18 @@ class JsonlEstimateWriter(EstimateWriter):
         }
         return json.dumps(obj, allow_nan=False) + "\n"
 
-    def _format_block(self, block: EstimateBlock) -> str:
-        # json.dumps writes a float with float.__repr__ and a key with its escapes: the same text as _format
-        keys = [json.dumps(lbl) for lbl in self.labels]
-        state = ", ".join(f"{k}: %r" for k in keys)
-        row = '{"time": %r, "state": {' + state + '}, "var": {' + state + '}, "nis": %s, "dof": %d, "flags": %s}\n'
-        nis = [repr(v) if math.isfinite(v) else "null" for v in block.nis.tolist()]
-        return (row * len(block)) % tuple(self._cells(block, nis))
+    def _row_keys(self, block: EstimateBlock) -> list[tuple]:
+        """Per row ``(dof, flags, whether the NIS is finite)``: a NaN NIS is written ``null``."""
+        return list(zip(block.dof, block.flags, np.isfinite(block.nis).tolist()))
 
-    def _flag_texts(self, flags: list[tuple[str, ...]]) -> list[str]:
-        return [json.dumps(list(f)) for f in flags]
+    def _row_format(self, dof: int, flags: tuple[str, ...], *rest) -> str:
+        # json.dumps writes a float with float.__repr__ and a key with its escapes: the same text as _format;
+        # "%.0s" takes a NaN NIS and writes nothing of it
+        (finite_nis,) = rest
+        state = ", ".join(f"{_literal(json.dumps(lbl))}: %r" for lbl in self.labels)
+        nis = "%r" if finite_nis else "null%.0s"
+        tail = _literal(f', "dof": {dof}, "flags": {json.dumps(list(flags))}}}\n')
+        return '{"time": %r, "state": {' + state + '}, "var": {' + state + '}, "nis": ' + nis + tail
 
 
 def make_writer(fmt: str, stream: TextIO, labels: Sequence[str], flush_each: bool = False) -> EstimateWriter:
