@@ -215,6 +215,24 @@ def test_csv_chunks_read_as_the_lines(seed, fine_halving):
         assert any(isinstance(item, RecordBlock) for item in got)
 
 
+@pytest.mark.parametrize(
+    "body",
+    [
+        ["1,1,3,4,5", "2,1,3"],  # one field too many, then one too few: as many fields in all as plain rows would have
+        ["1,1,3", "2,1,3,4,5"],
+        ["1,1,3,4", "2,1,3,4,5", "3,1,3"],
+        ["1,1,3,4", "2,1,3,4"],  # plain (numeric sensor ids): one block
+    ],
+)
+def test_csv_chunk_of_rows_of_unequal_width_reads_as_the_lines(body):
+    # the chunk is split once for all its rows: rows of unequal width must not shift the columns of the rows after them
+    raws = [line.encode() + b"\n" for line in ["time,sensor,x,y", *body * 20]]
+    expected = list(read_csv(raws))
+    got = list(read_record_chunks([raws], "csv"))
+    assert _expand(got) == expected
+    assert any(isinstance(item, RecordBlock) for item in got) == (len(body) == 2 and body[0].count(",") == body[1].count(","))
+
+
 _JSON_LINES = [
     '{"time": 1, "time": 2, "sensor": "gps"}',
     '{"time": 1.0, "sensor": "gps", "value": [1, NaN]}',

@@ -32,6 +32,7 @@ import json
 import math
 import re
 from dataclasses import dataclass
+from itertools import repeat
 from datetime import datetime, timezone
 from typing import Any, Callable, Iterable, Iterator, Mapping
 
@@ -382,18 +383,20 @@ class _CsvReader:
             text = data.decode("utf-8")
         except UnicodeDecodeError:
             return None
-        rows = [line.split(",") for line in text[:-1].split("\n")]
-        if len(rows) != len(raws):
+        lines = text[:-1].split("\n")
+        if len(lines) != len(raws):
             return None
-        width = len(rows[0])
-        if width < 3 or any(len(r) != width for r in rows):
+        # every line as wide as the first (counted in C, no list per line); then one split of the whole chunk
+        commas = lines[0].count(",")
+        if commas < 2 or set(map(str.count, lines, repeat(","))) != {commas}:
             return None
-        columns = list(zip(*rows))
-        sensors = columns[1]
+        fields = text[:-1].replace("\n", ",").split(",")
+        width = commas + 1
+        sensors = fields[1::width]
         names = set(sensors)
         if any(not name or name != name.strip() for name in names):
             return None
-        numbers = [columns[0], *columns[2:]]
+        numbers = [fields[0::width], *(fields[k::width] for k in range(2, width))]
         # only the characters of a plain number: float() then reads exactly what _NUMBER matches (no spaces, _ or words)
         if "".join(["".join(c) for c in numbers]).translate(_PLAIN_NUMBER):
             return None
