@@ -22,6 +22,7 @@ from pursuit.cli import main
 from pursuit.io import lines as lines_mod
 from pursuit.io import records as records_mod
 from pursuit.io import tracker as tracker_mod
+from pursuit.io import writers as writers_mod
 from pursuit.io.blocks import EstimateBlock, RecordBlock
 from pursuit.io.lines import ChunkedLines
 from pursuit.io.records import block_records, read_csv, read_jsonl, read_record_chunks
@@ -366,3 +367,35 @@ def test_write_block_writes_the_rows_of_write_on_awkward_values(fmt):
         part = EstimateBlock(times[:k], means[:k], var[:k], nis[:k], dof[:k], flags[:k], block.lines[:k], block.covs[:k])
         make_writer(fmt, out, labels).write_block(part)
         assert out.getvalue() == want
+
+
+@pytest.mark.parametrize("fmt", ["csv", "jsonl"])
+def test_write_block_writes_the_rows_of_write_on_repeated_values(fmt):
+    # columns that repeat their value over runs of rows (a converged covariance) are written as text made once per
+    # run: equal bits only, so -0.0 next to 0.0 and NaNs of another payload are runs of their own
+    rng = np.random.default_rng(12)
+    n, d = 400, 3
+    positive = [v for v in AWKWARD if v > 0]
+    var = np.column_stack([np.repeat(rng.choice(positive, 20), 20), np.full(n, 1e-300), rng.random(n) + 1.0])
+    var[37, 1] = 5e-324  # one change in a constant column
+    means = np.column_stack([np.tile(np.repeat([-0.0, 0.0], 25), n // 50), np.repeat(rng.choice(AWKWARD, 8), 50), rng.normal(size=n)])
+    nis = np.repeat(rng.choice([5e-324, 2.0**53, math.nan, 0.5], 10), 40)
+    if fmt == "csv":  # NaNs of two payloads, one run each (both write 'nan')
+        other_nan = np.array([0x7FF8000000000001], dtype=np.int64).view(float)[0]
+        means[100:150, 1], means[150:200, 1] = math.nan, other_nan
+    times = np.arange(n) + 0.5
+    dof = [2] * n
+    dof[200:220] = [0] * 20
+    flags: list[tuple[str, ...]] = [()] * n
+    flags[200:220] = [("predict",)] * 20
+    flags[300] = ("diverged",)
+    block = EstimateBlock(times, means, var, nis, dof, flags, np.arange(n) + 2, np.zeros((n, d, d)))
+    labels = ["x", "y", "z"]
+    rows, whole = io.StringIO(), io.StringIO()
+    writer = make_writer(fmt, rows, labels)
+    for i in range(n):
+        writer.write(Estimate(float(times[i]), means[i], var[i], float(nis[i]), dof[i], flags[i], (i + 2,), block.covs[i]))
+    make_writer(fmt, whole, labels).write_block(block)
+    assert whole.getvalue() == rows.getvalue()
+    codes = [writers_mod._repeated_as_text(np.column_stack([times, means, var, nis]), j, [None] * (n * 8)) for j in range(8)]
+    assert codes == ["%r", "%s", "%s", "%r", "%s", "%s", "%r", "%s"]  # the path under test was taken

@@ -63,7 +63,9 @@ class EstimateWriter:
         ``tolist()``, so ``%r`` writes each as ``repr`` of a Python float, the
         text :meth:`_format` writes; what else a row holds (dof, flags, and in
         JSON Lines whether the NIS is ``null``) is written into the run's row
-        format as text.
+        format as text.  A column that mostly repeats its value from row to row
+        (the variances of a filter whose covariance has converged) is written
+        as text made once per run of equal bits (:func:`_repeated_as_text`).
         """
         n = len(block)
         if n == 0:
@@ -71,6 +73,7 @@ class EstimateWriter:
         floats = np.column_stack([block.times, block.means, block.var, block.nis]).astype(float, copy=False)
         per_row = floats.shape[1]
         flat = floats.ravel().tolist()
+        codes = tuple(_repeated_as_text(floats, j, flat) for j in range(per_row))
         keys = self._row_keys(block)
         rows: dict = {}
         parts = []
@@ -78,7 +81,7 @@ class EstimateWriter:
             key = keys[start]
             row = rows.get(key)
             if row is None:
-                row = rows[key] = self._row_format(*key)
+                row = rows[key] = self._row_format(codes, *key)
             parts.append((row * (stop - start)) % tuple(flat[start * per_row : stop * per_row]))
         return "".join(parts)
 
@@ -86,8 +89,11 @@ class EstimateWriter:
         """Per row, what :meth:`_row_format` needs: ``(dof, flags)``."""
         return list(zip(block.dof, block.flags))
 
-    def _row_format(self, dof: int, flags: tuple[str, ...], *rest) -> str:  # pragma: no cover - abstract
-        """A ``%`` format of one row that takes its floats (time, mean, variances, NIS) in that order."""
+    def _row_format(self, codes: tuple[str, ...], dof: int, flags: tuple[str, ...], *rest) -> str:  # pragma: no cover - abstract
+        """A ``%`` format of one row that takes its floats (time, mean, variances, NIS) in that order.
+
+        ``codes`` holds the conversion of each float: ``"%r"``, or ``"%s"`` where the block gives it as its text.
+        """
         raise NotImplementedError
 
 
@@ -99,6 +105,26 @@ def _runs(keys: list) -> list[tuple[int, int]]:
         return [(0, len(keys))]
     cuts = [i for i in range(1, len(keys)) if keys[i] != keys[i - 1]]
     return list(zip([0, *cuts], [*cuts, len(keys)]))
+
+
+def _repeated_as_text(floats: np.ndarray, j: int, flat: list) -> str:
+    """Column ``j``'s conversion code: ``"%s"`` after putting its text into ``flat`` when it mostly repeats, else ``"%r"``.
+
+    ``repr`` of a float is most of a block's time; a column whose value stays
+    the same over runs of rows (compared by bits, so -0.0 and 0.0 or two NaNs
+    are not merged) gets ``repr`` once per run instead of once per row, the
+    same text.
+    """
+    n, per_row = floats.shape
+    col = floats[:, j]
+    bits = col.view(np.int64)
+    starts = np.flatnonzero(bits[1:] != bits[:-1]) + 1
+    if 4 * len(starts) >= n:  # mostly changing: %r of each
+        return "%r"
+    starts = np.concatenate([[0], starts])
+    words = np.array([repr(v) for v in col[starts].tolist()], dtype=object)
+    flat[j::per_row] = np.repeat(words, np.diff(np.append(starts, n))).tolist()
+    return "%s"
 
 
 def _literal(text: str) -> str:
@@ -121,9 +147,9 @@ class CsvEstimateWriter(EstimateWriter):
         nums = [float(est.time), *est.mean.tolist(), *est.var.tolist(), float(est.nis)]
         return ",".join([*map(repr, nums), str(est.dof), ";".join(est.flags)]) + "\n"
 
-    def _row_format(self, dof: int, flags: tuple[str, ...], *rest) -> str:
+    def _row_format(self, codes: tuple[str, ...], dof: int, flags: tuple[str, ...], *rest) -> str:
         # %r of a Python float is its repr, as in _format; dof and flags as _format writes them
-        return "%r," * (2 * len(self.labels) + 2) + _literal(f"{dof},{';'.join(flags)}\n")
+        return "".join(code + "," for code in codes) + _literal(f"{dof},{';'.join(flags)}\n")
 
 
 class JsonlEstimateWriter(EstimateWriter):
@@ -144,14 +170,17 @@ class JsonlEstimateWriter(EstimateWriter):
         """Per row ``(dof, flags, whether the NIS is finite)``: a NaN NIS is written ``null``."""
         return list(zip(block.dof, block.flags, np.isfinite(block.nis).tolist()))
 
-    def _row_format(self, dof: int, flags: tuple[str, ...], *rest) -> str:
+    def _row_format(self, codes: tuple[str, ...], dof: int, flags: tuple[str, ...], *rest) -> str:
         # json.dumps writes a float with float.__repr__ and a key with its escapes: the same text as _format;
         # "%.0s" takes a NaN NIS and writes nothing of it
         (finite_nis,) = rest
-        state = ", ".join(f"{_literal(json.dumps(lbl))}: %r" for lbl in self.labels)
-        nis = "%r" if finite_nis else "null%.0s"
+        d = len(self.labels)
+        keys = [_literal(json.dumps(lbl)) for lbl in self.labels]
+        state = ", ".join(f"{k}: {c}" for k, c in zip(keys, codes[1 : d + 1]))
+        var = ", ".join(f"{k}: {c}" for k, c in zip(keys, codes[d + 1 : 2 * d + 1]))
+        nis = codes[-1] if finite_nis else "null%.0s"
         tail = _literal(f', "dof": {dof}, "flags": {json.dumps(list(flags))}}}\n')
-        return '{"time": %r, "state": {' + state + '}, "var": {' + state + '}, "nis": ' + nis + tail
+        return '{"time": ' + codes[0] + ', "state": {' + state + '}, "var": {' + var + '}, "nis": ' + nis + tail
 
 
 def make_writer(fmt: str, stream: TextIO, labels: Sequence[str], flush_each: bool = False) -> EstimateWriter:
