@@ -111,9 +111,8 @@ def _repeated_as_text(floats: np.ndarray, j: int, flat: list) -> str:
     """Column ``j``'s conversion code: ``"%s"`` after putting its text into ``flat`` when it mostly repeats, else ``"%r"``.
 
     ``repr`` of a float is most of a block's time; a column whose value stays
-    the same over runs of rows (compared by bits, so -0.0 and 0.0 or two NaNs
-    are not merged) gets ``repr`` once per run instead of once per row, the
-    same text.
+    the same over runs of rows (compared by bits, so -0.0 and 0.0 are not
+    merged) gets ``repr`` once per run instead of once per row, the same text.
     """
     n, per_row = floats.shape
     col = floats[:, j]
