@@ -12,7 +12,7 @@ PYTEST_ARGS ?=
 
 help:
 	@echo "make demo   reproduce every experiment under experiments/ into results/"
-	@echo "make test   run the test suite but the tests marked slow (12-17 min on two cores from a clean clone)"
+	@echo "make test   run the test suite but the tests marked slow, on the serial numba builds (see docs/testing.md for its time)"
 	@echo "make test-slow   run the tests marked slow: whole reproductions, benchmark scripts, million-step and many-run checks"
 	@echo "make test-all   make test, then make test-slow"
 	@echo "make test-avx2-paths   on an AVX-512 CPU, rerun the compiled, cross-check and robustness tests on NumPy's AVX2 paths"
@@ -52,8 +52,10 @@ demo: $(VENV)/.installed
 # .test-cache/ for every worker and subprocess, named by a hash of src/pursuit/_compiled: the
 # passes below compile each kernel about once between them (docs/testing.md#running-the-tests).
 # --durations=15 lists the slowest tests of each pass: a new test over about 5 s gets the slow mark.
+# PURSUIT_NUMBA_PARALLEL=0: the serial kernel builds only (same source, same bits); the parallel builds,
+# four times the compile time, are compiled and checked against them in make test-slow.
 test: $(VENV)/.installed-test
-	$(BIN)/python -m pytest -n auto -m "not slow" --durations=15 $(PYTEST_ARGS)
+	PURSUIT_NUMBA_PARALLEL=0 $(BIN)/python -m pytest -n auto -m "not slow" --durations=15 $(PYTEST_ARGS)
 
 test-slow: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -n auto -m slow --durations=15 $(PYTEST_ARGS)

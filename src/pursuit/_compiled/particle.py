@@ -15,6 +15,7 @@ public API.
 
 from __future__ import annotations
 
+import os
 import threading
 from typing import Any
 
@@ -52,9 +53,28 @@ RESAMPLER_CODES = {
 }
 
 
+def _parallel_allowed(environ=os.environ) -> bool:
+    """``PURSUIT_NUMBA_PARALLEL``: ``1`` (the default) lets batches run on numba's threads, ``0`` keeps every kernel serial.
+
+    The parallel builds are the same source as the serial ones (``common.serial_and_parallel``) and
+    give the same bits; they cost about four times the serial build's compile time (numba's
+    parallel passes), which is most of a cold cache's compile time.  ``0`` skips them: one thread,
+    no parallel compiles (``make test`` sets it; ``make test-slow`` checks the parallel builds
+    against the serial ones, docs/compiled-backend.md#threads).
+    """
+    value = environ.get("PURSUIT_NUMBA_PARALLEL", "1").strip()
+    if value not in ("0", "1"):
+        raise ValueError(f"environment variable PURSUIT_NUMBA_PARALLEL: expected 0 or 1, got {value!r}")
+    return value == "1"
+
+
+PARALLEL = _parallel_allowed()
+
+
 def use_parallel(runs: int) -> bool:
-    """Parallel kernels only from the main thread (numba's default threading layer is not re-entrant) and for > 1 run."""
-    return runs > 1 and threading.current_thread() is threading.main_thread()
+    """Parallel kernels only where allowed (:data:`PARALLEL`), from the main thread (numba's default
+    threading layer is not re-entrant) and for > 1 run."""
+    return PARALLEL and runs > 1 and threading.current_thread() is threading.main_thread()
 
 
 _NO_STREAMS = np.zeros(1, dtype=np.uint64)

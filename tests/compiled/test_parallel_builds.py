@@ -1,0 +1,66 @@
+"""The parallel kernel builds give the serial builds' bits (``PURSUIT_NUMBA_PARALLEL``).
+
+``make test`` runs on the serial builds only (``PURSUIT_NUMBA_PARALLEL=0``: the parallel builds cost
+about four times the compile time); this slow module compiles the parallel ones and checks every
+compiled filter family batched through them, step by step and whole sequence, against the serial
+builds (docs/compiled-backend.md#threads).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("numba")
+
+import pursuit as pu  # noqa: E402
+from pursuit._compiled import particle  # noqa: E402
+from pursuit.rng import run_streams  # noqa: E402
+from pursuit.scenarios import LinearCV, WSNRange  # noqa: E402
+
+from ..filters.cases import CASES  # noqa: E402
+
+RUNS = 6  # > 1 run: a batch the parallel builds take
+
+NUMBA_CASES = [c for c in CASES if c.id.endswith("-numba")]
+
+
+def _scenario(case):
+    if case.scenario is not None:
+        return case.scenario
+    return LinearCV(ndim=2, steps=6) if case.id.startswith("kf-") else WSNRange(steps=6)
+
+
+def _track(case, parallel: bool, sequence: bool, monkeypatch) -> pu.Track:
+    monkeypatch.setattr(particle, "PARALLEL", parallel)
+    assert particle.use_parallel(RUNS) is parallel
+    scenario = _scenario(case)
+    sim = scenario.simulate(run_streams(1, range(RUNS), 0), RUNS)
+    filt = case.build(scenario)
+    return pu.run(filt, sim.measurements, sim.prior, rng=run_streams(2, range(RUNS), 1), sequence=sequence)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sequence", [True, False], ids=["sequence", "step"])
+@pytest.mark.parametrize("case", NUMBA_CASES, ids=[c.id for c in NUMBA_CASES])
+def test_parallel_builds_give_the_serial_builds_bits(case, sequence, monkeypatch):
+    serial = _track(case, False, sequence, monkeypatch)
+    parallel = _track(case, True, sequence, monkeypatch)
+    assert parallel.mean.tobytes() == serial.mean.tobytes()
+    if serial.cov is not None:
+        assert parallel.cov.tobytes() == serial.cov.tobytes()
+    assert parallel.info.keys() == serial.info.keys()
+    for key in serial.info:
+        assert np.asarray(parallel.info[key]).tobytes() == np.asarray(serial.info[key]).tobytes(), key
+
+
+@pytest.mark.parametrize("value, allowed", [(None, True), ("1", True), ("0", False), (" 0 ", False)])
+def test_the_environment_variable_chooses_the_builds(value, allowed):
+    environ = {} if value is None else {"PURSUIT_NUMBA_PARALLEL": value}
+    assert particle._parallel_allowed(environ) is allowed
+
+
+@pytest.mark.parametrize("value", ["2", "yes", "", "true"])
+def test_a_bad_value_of_the_environment_variable_is_an_error_naming_it(value):
+    with pytest.raises(ValueError, match="PURSUIT_NUMBA_PARALLEL: expected 0 or 1"):
+        particle._parallel_allowed({"PURSUIT_NUMBA_PARALLEL": value})
