@@ -58,7 +58,7 @@ test: $(VENV)/.installed-test
 	PURSUIT_NUMBA_PARALLEL=0 $(BIN)/python -m pytest -n auto -m "not slow" --durations=15 $(PYTEST_ARGS)
 
 test-slow: $(VENV)/.installed-test
-	$(BIN)/python -m pytest -n auto -m slow --durations=15 $(PYTEST_ARGS)
+	PURSUIT_NUMBA_PARALLEL=1 $(BIN)/python -m pytest -n auto -m slow --durations=15 $(PYTEST_ARGS)
 
 test-all: test test-slow
 

@@ -10,7 +10,7 @@ from pursuit._compiled import kf_codegen
 numba = pytest.importorskip("numba")
 
 import pursuit as pu  # noqa: E402
-from pursuit._compiled import generated  # noqa: E402
+from pursuit._compiled import generated, particle  # noqa: E402
 from pursuit.models import ConstantAcceleration, ConstantVelocity, LinearGaussian  # noqa: E402
 
 from .test_numba_backend import _close  # noqa: E402 (the NaN, infinity and 1e-9 agreement check of the compiled tests)
@@ -127,8 +127,9 @@ def test_load_module_replaces_a_damaged_file(tmp_path, monkeypatch):
     assert path.read_text() == source
 
 
-def test_threads_split_the_blocks_and_give_the_same_bits():
+def test_threads_split_the_blocks_and_give_the_same_bits(monkeypatch):
     """run_blocks shares the blocks of runs among threads; each run's bits do not depend on the split."""
+    monkeypatch.setattr(particle, "PARALLEL", True)  # the threads, also under make test's PURSUIT_NUMBA_PARALLEL=0
     motion, meas = _models("cv2d-m2")
     zs, prior = _data(motion, meas, M=300, T=6)  # 3 blocks of the sequence kernel, 2 of the step kernel
     filt = pu.KalmanFilter(motion, meas, backend="numba")

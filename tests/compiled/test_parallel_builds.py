@@ -14,13 +14,15 @@ import pytest
 pytest.importorskip("numba")
 
 import pursuit as pu  # noqa: E402
-from pursuit._compiled import particle  # noqa: E402
+from pursuit._compiled import gauss_kernels, particle  # noqa: E402
 from pursuit.rng import run_streams  # noqa: E402
 from pursuit.scenarios import LinearCV, WSNRange  # noqa: E402
 
 from ..filters.cases import CASES  # noqa: E402
 
-RUNS = 6  # > 1 run: a batch the parallel builds take
+# three blocks of the Gaussian step kernels (the last one short): the parallel builds' prange and the
+# generated KF's thread pool (blocks of 128) split the batch among threads
+RUNS = 2 * gauss_kernels.BLOCK + 7
 
 NUMBA_CASES = [c for c in CASES if c.id.endswith("-numba")]
 
@@ -64,3 +66,36 @@ def test_the_environment_variable_chooses_the_builds(value, allowed):
 def test_a_bad_value_of_the_environment_variable_is_an_error_naming_it(value):
     with pytest.raises(ValueError, match="PURSUIT_NUMBA_PARALLEL: expected 0 or 1"):
         particle._parallel_allowed({"PURSUIT_NUMBA_PARALLEL": value})
+
+
+def _shared_generator_run(monkeypatch, parallel: bool, sequence: bool) -> pu.Track:
+    """A bootstrap PF batch on one NumPy Generator: the kernels resample with NumPy's uniforms."""
+    monkeypatch.setattr(particle, "PARALLEL", parallel)
+    scenario = WSNRange(steps=6)
+    sim = scenario.simulate(run_streams(1, range(RUNS), 0), RUNS)
+    filt = pu.BootstrapParticleFilter(scenario.motion, scenario.measurement, particles=200, backend="numba")
+    return pu.run(filt, sim.measurements, sim.prior, rng=np.random.default_rng(5), sequence=sequence)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sequence", [True, False], ids=["sequence", "step"])
+def test_the_shared_generator_resampling_gives_the_same_bits_on_both_builds(sequence, monkeypatch):
+    serial = _shared_generator_run(monkeypatch, False, sequence)
+    parallel = _shared_generator_run(monkeypatch, True, sequence)
+    assert serial.info["resampled"].any()  # the resampling kernel ran
+    assert parallel.mean.tobytes() == serial.mean.tobytes()
+    for key in serial.info:
+        assert np.asarray(parallel.info[key]).tobytes() == np.asarray(serial.info[key]).tobytes(), key
+
+
+def test_serial_builds_only_never_call_a_parallel_build(monkeypatch):
+    """``PURSUIT_NUMBA_PARALLEL=0`` keeps the shared-Generator resampling serial too (it always took the parallel build)."""
+    from pursuit._compiled import pf_kernels
+
+    def refuse(*args):
+        raise AssertionError("a parallel build ran")
+
+    monkeypatch.setattr(pf_kernels, "pf_resample_parallel", refuse)
+    monkeypatch.setattr(pf_kernels, "pf_step_parallel", refuse)
+    track = _shared_generator_run(monkeypatch, False, sequence=False)
+    assert track.info["resampled"].any()

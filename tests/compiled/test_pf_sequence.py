@@ -8,6 +8,7 @@ import pytest
 numba = pytest.importorskip("numba")
 
 import pursuit as pu  # noqa: E402
+from pursuit._compiled import particle  # noqa: E402
 from pursuit.models import ConstantVelocity, RangeBearing, RangeSensors  # noqa: E402
 from pursuit.rng import run_streams  # noqa: E402
 from pursuit.scenarios.ungm import UNGM  # noqa: E402
@@ -80,7 +81,9 @@ def test_sequence_agrees_with_numpy():
     assert np.array_equal(b.info["resampled"], a.info["resampled"])
 
 
-def test_one_and_two_threads_give_the_same_bits():
+@pytest.mark.slow  # the parallel build: make test runs the serial builds only (PURSUIT_NUMBA_PARALLEL=0)
+def test_one_and_two_threads_give_the_same_bits(monkeypatch):
+    monkeypatch.setattr(particle, "PARALLEL", True)
     motion, meas, zs, prior = _ungm(M=10, T=15)
     filt = pu.BootstrapParticleFilter(motion, meas, particles=400, backend="numba", ess_threshold=0.5)
     before = numba.get_num_threads()

@@ -18,6 +18,7 @@ numba = pytest.importorskip("numba")
 import pursuit as pu  # noqa: E402
 from pursuit._compiled import gauss_kernels  # noqa: E402
 from pursuit._compiled import gaussian as glue  # noqa: E402
+from pursuit._compiled import particle  # noqa: E402
 from pursuit.models import ConstantVelocity, LinearGaussian, RangeBearing, RangeSensors  # noqa: E402
 
 RTOL = 1e-9  # tests/compiled/test_numba_backend.py's agreement with NumPy
@@ -125,9 +126,12 @@ def test_sequence_agrees_with_numpy(name, sensor):
         _close(a.info[key], b.info[key], key)
 
 
-@pytest.mark.parametrize("threads", [1, 2])
-def test_a_runs_bits_do_not_depend_on_its_block(threads):
+# 2 threads: the parallel build (make test runs the serial builds only, PURSUIT_NUMBA_PARALLEL=0)
+@pytest.mark.parametrize("threads", [1, pytest.param(2, marks=pytest.mark.slow)])
+def test_a_runs_bits_do_not_depend_on_its_block(threads, monkeypatch):
     """Chunking invariance: a run gives the same bits alone, in a batch of 5 and at any place of a batch spanning several blocks."""
+    if threads > 1:
+        monkeypatch.setattr(particle, "PARALLEL", True)
     motion, meas = SENSORS["range-bearing 2-D"]
     M = 2 * gauss_kernels.SEQUENCE_BLOCK + 7  # three blocks, the last one short
     zs, x0 = _data(motion, meas, M=M, T=20)

@@ -112,7 +112,8 @@ def _resample_with_numpy_draws(rng, need: np.ndarray, rkind: int, N: int, logw_o
     rows = np.flatnonzero(need)
     U = np.zeros((need.size, K.n_uniforms(rkind, N)))
     U[rows] = rows_rng(rng, rows).random((rows.size, U.shape[1]))
-    K.pf_resample_parallel(logw_out, need, U, rkind, Xout)
+    kernel = K.pf_resample_parallel if use_parallel(need.size) else K.pf_resample_serial
+    kernel(logw_out, need, U, rkind, Xout)
 
 
 def _step_info(batch, m, innov, S, nis, dof, loglik, reset, ess, need) -> dict[str, np.ndarray]:

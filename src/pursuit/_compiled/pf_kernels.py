@@ -1009,4 +1009,4 @@ def _pf_resample(logw_out, need, U, rkind, Xout):
 
 pf_step_serial, pf_step_parallel = serial_and_parallel(_pf_step, cache=True, error_model="numpy")
 pf_sequence_serial, pf_sequence_parallel = serial_and_parallel(_pf_sequence, cache=True, error_model="numpy")
-pf_resample_parallel = njit(cache=True, parallel=True, error_model="numpy")(_pf_resample)
+pf_resample_serial, pf_resample_parallel = serial_and_parallel(_pf_resample, cache=True, error_model="numpy")
