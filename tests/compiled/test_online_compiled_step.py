@@ -8,6 +8,8 @@ cross-check (1e-9 relative).
 
 from __future__ import annotations
 
+import copy
+import inspect
 import pickle
 
 import numpy as np
@@ -252,6 +254,7 @@ def test_scalar_kernels_give_the_block_kernels_bits(cls, label, meas, centre, fa
     scalar(centre, bad_P, z, *packed, a)
     block(centre, bad_P, z, *packed, b)
     assert a[lane.ok_row] == b[lane.ok_row] == 0.0
+    assert scalar(centre, bad_P, z, *packed, a) == 2  # said by the return code too: the lane reads no row for it
     # an infinite measurement is refused by both
     z_inf = np.full(m, np.inf)
     assert scalar(centre, COV0, z_inf, *packed, a) == block(centre, COV0, z_inf, *packed, b) == 1
@@ -288,6 +291,55 @@ def test_the_fast_path_equals_the_general_path():
         assert s.k == fast[k][0].k == k + 1
         for key in INFO_KEYS:
             assert np.array_equal(info[key], fast[k][1][key], equal_nan=True), key
+
+
+@pytest.mark.parametrize("cls", [pu.KalmanFilter, pu.UnscentedKalmanFilter])
+def test_a_covariance_that_does_not_factor_on_the_fast_path_goes_to_the_batched_step(cls):
+    """A chained state whose covariance was overwritten in place (not positive definite): the kernel says so by its
+    return code and the batched step takes the step (the UKF's repair), as on the general path and as the NumPy step."""
+    bad = np.diag([1.0, -2.0, 1.0, 1.0])  # the predicted covariance does not factor either
+    filt, ref = _filters(cls, LINEAR)
+    z1, z2 = np.array([10.0, 40.0]), np.array([11.0, 40.5])
+    if cls is pu.KalmanFilter:  # the generated kernel: a covariance whose innovation covariance does not factor
+        bad = np.diag([-5.0, 0.5, 1.0, 0.5])
+    s, _ = filt.step(filt.init(pu.Gaussian(X0, COV0)), z1)
+    s.cov[...] = bad
+    fast, fast_info = filt.step(s, z2)  # s is the lane's last state: the fast path
+    general, general_info = filt.step(s, z2, k=2)
+    want, want_info = ref.step(pu.filters.GaussianState(mean=s.mean.copy(), cov=bad.copy(), k=1), z2)
+    assert not isinstance(fast_info, StepInfo)  # the batched step's info: the lane handed the step over
+    assert bool(fast_info["repaired"]) == bool(want_info["repaired"]) == (cls is pu.UnscentedKalmanFilter)
+    assert np.array_equal(fast.mean, general.mean) and np.array_equal(fast.cov, general.cov)
+    np.testing.assert_allclose(fast.mean, want.mean, rtol=1e-9)
+    np.testing.assert_allclose(fast.cov, want.cov, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("name, cls, meas", [CASES[0], CASES[3]])
+def test_the_lanes_step_becomes_the_filters_own(name, cls, meas):
+    """After the first step, ``filt.step`` is the lane's step (one frame per call) with the class step's name,
+    docstring and signature; copies and pickles leave it out and make their own; a subclass's step is untouched."""
+    filt, ref = _filters(cls, meas)
+    z = _measurements(meas)[0]
+    assert "step" not in vars(filt)
+    s, _ = filt.step(filt.init(pu.Gaussian(X0, COV0)), z)
+    assert "step" in vars(filt)
+    assert filt.step.__doc__ == cls.step.__doc__ and filt.step.__name__ == "step"
+    assert inspect.signature(filt.step) == inspect.signature(ref.step)
+    a, _ = filt.step(s, z, 2, None)  # positional k and dt, as the class step takes them
+    b, _ = ref.step(s, z, k=2)
+    np.testing.assert_allclose(a.mean, b.mean, rtol=1e-9)
+    for other in (copy.copy(filt), copy.deepcopy(filt), pickle.loads(pickle.dumps(filt))):
+        assert "step" not in vars(other) and "_online_lane" not in vars(other)
+        c, _ = other.step(s, z, k=2)
+        assert np.array_equal(c.mean, a.mean) and "step" in vars(other)
+
+    class Own(cls):
+        def step(self, state, z, k=None, dt=None):
+            return super().step(state, z, k, dt)
+
+    own = Own(MOTION, meas, backend="numba")
+    c, _ = own.step(own.init(pu.Gaussian(X0, COV0)), z)
+    assert "step" not in vars(own) and np.array_equal(c.mean, s.mean)
 
 
 @pytest.mark.parametrize("batch", [(), (1,)])

@@ -449,11 +449,13 @@ def one_constants(F: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray, la
 
 
 def _one_source(n: int, m: int, pats: tuple) -> list[str]:
-    """``one(x (n,), P (n, n), z (m,), c, out (rows,))``: the step kernel's body for one run; returns 1 if z is unusable.
+    """``one(x (n,), P (n, n), z (m,), c, out (rows,))``: the step kernel's body for one run; returns 0, 1 or 2.
 
     ``z`` holding an infinity or a value beyond ±2⁵⁰⁰ returns 1 before
     anything is computed (the caller raises the NumPy step's error); else the
-    results go to ``out`` at the rows of :func:`step_rows` and it returns 0.
+    results go to ``out`` at the rows of :func:`step_rows` and it returns 0,
+    or 2 where a covariance does not factor (``ok`` is 0.0: the caller then
+    needs no read of ``out`` to know it).
     """
     w = _Writer("")
     w.line(f"def _one({ONE_ARGS}):")
@@ -475,7 +477,7 @@ def _one_source(n: int, m: int, pats: tuple) -> list[str]:
                 {a: f"not math.isnan(z[{a}])" for a in range(m)})
 
     _write_outputs(w, res, rows, n, m, lambda row: f"out[{row}]")
-    w.line("return 0")
+    w.line("return 0 if good else 2")
     return w.lines
 
 

@@ -245,7 +245,7 @@ def _finish(out, at, nis, loglik, dof, ok):
 
 @njit(**_NJ)
 def ekf_one_scalar(x, P, z, prediction, sensor, out):
-    """One KF/EKF step of one run (the arithmetic of :func:`.gauss_kernels.ekf_step_serial`) into ``out``; 1 if ``z`` is unusable, else 0."""
+    """One KF/EKF step of one run (the arithmetic of :func:`.gauss_kernels.ekf_step_serial`) into ``out``; 1 if ``z`` is unusable, 2 if a covariance does not factor, else 0."""
     F, Q, lam = prediction
     n = x.shape[0]
     m = z.shape[0]
@@ -290,13 +290,14 @@ def ekf_one_scalar(x, P, z, prediction, sensor, out):
     _mm(H, L, HL)
     D[:] = 0.0
     ok2, nis, dof, loglik = _update(xp, Pp, zp, Pzz, PHt, L, HL, D, z, v, sensor, x_o, P_o, innov, S, upd)
-    _finish(out, at, nis, loglik, dof, ok and ok2)
-    return 0
+    good = ok and ok2
+    _finish(out, at, nis, loglik, dof, good)
+    return 0 if good else 2
 
 
 @njit(**_NJ)
 def sigma_one_scalar(x, P, z, prediction, sensor, sigma, out):
-    """One UKF/CKF step of one run (the arithmetic of :func:`.gauss_kernels.sigma_step_serial`) into ``out``; 1 if ``z`` is unusable, else 0."""
+    """One UKF/CKF step of one run (the arithmetic of :func:`.gauss_kernels.sigma_step_serial`) into ``out``; 1 if ``z`` is unusable, 2 if a covariance does not factor, else 0."""
     F, Q, lam = prediction
     cscale, wm, wc, centre = sigma
     angle, kind = sensor.angle, sensor.kind
@@ -405,8 +406,9 @@ def sigma_one_scalar(x, P, z, prediction, sensor, sigma, out):
                 o += E[s, a] * wc[s] * E[s, b]
             D[a, b] = o
     ok2, nis, dof, loglik = _update(xp, Pp, zp, Pzz, Pxz, L, GT, D, z, v, sensor, x_o, P_o, innov, S, upd)
-    _finish(out, at, nis, loglik, dof, ok and ok2)
-    return 0
+    good = ok and ok2
+    _finish(out, at, nis, loglik, dof, good)
+    return 0 if good else 2
 
 
 @njit(**_NJ)

@@ -32,9 +32,16 @@ one run needs:
   never trusted, only the lane's own output.
 
 The step of a tracking loop (the state the lane returned last, no ``k`` or
-``dt``, ``z`` a float64 vector of the run's shape) takes a fast path in
-:meth:`_Lane.__call__` that skips every branch of the general path
-(:meth:`_Lane.general`); both give the same bits.
+``dt``, ``z`` a float64 vector of the run's shape) takes a fast path in the
+step :meth:`_Lane.filter_step` makes, which skips every branch of the
+general path (:meth:`_Lane.general`); both give the same bits.  That step is
+also the filter's own ``step`` once the lane is made (an instance attribute
+that falls back on the filter's batched step where the lane does not apply:
+:meth:`pursuit.filters.base.FilterBase._take_lane_step`), so the loop's
+``filt.step(state, z)`` is one Python frame; the kernel says by its return
+code whether the step needs the batched path (a covariance that does not
+factor), so the fast path reads nothing of the output before making the
+state.
 
 A KF/EKF with a linear measurement runs the generated kernel ``one``
 (:mod:`pursuit._compiled.kf_codegen`), written from the same body as the
@@ -158,7 +165,7 @@ def _vector(z: Any, m: int, batch: tuple[int, ...], k: int) -> np.ndarray:
 
 
 class _Lane:
-    """One run's step: the kernel ``kernel(x (n,), P (n, n), z (m,), *model, out) -> 0 | 1`` and the Python around it.
+    """One run's step: the kernel ``kernel(x (n,), P (n, n), z (m,), *model, out) -> 0 | 1 | 2`` and the Python around it.
 
     ``out`` is one fresh vector per step with the rows of
     :func:`pursuit._compiled.kf_codegen.step_rows`; the returned state and
@@ -187,7 +194,13 @@ class _Lane:
         self.px = rows["P"][0]
         self.pn = self.px + n * n
         self.ok_row = rows["ok"][0]
-        self.xs, self.Ps = slice(0, n), slice(self.px, self.pn)  # the fast path's views of out, made once
+        # the fast path allocates out as rows of n (x is row 0, P rows px/n onward: step_rows puts both on a
+        # multiple of n) and hands the kernel its flat view: an index and a slice then give x (n,) and P (n, n),
+        # cheaper than slicing a flat vector and reshaping (a third of a microsecond of a two-microsecond step)
+        assert self.px % n == 0
+        self.grid = (-(-self.size // n), n)
+        self.prow = slice(self.px // n, self.px // n + n)
+        self.step = self.filter_step()  # what the filter's class step calls: None where the lane does not apply
 
     def model(self, dt: float | None) -> tuple | None:
         """The kernel's model arguments at ``dt`` (None: the motion model's own), or None where the lane does not apply."""
@@ -218,35 +231,59 @@ class _Lane:
             return None
         return np.array(mean.reshape(n), dtype=float), np.array(cov.reshape(n, n), dtype=float), batch
 
-    def __call__(self, state: GaussianState, z: Any, k: int | None, dt: Any):
-        # the tracking loop's step first (the state this lane returned last, the model's own k and dt, z a
-        # float vector whose elements are adjacent): no branch of the general path below is needed
-        if state is self.chained and k is None and dt is None and type(z) is np.ndarray and z.shape == self.zshape \
-                and z.dtype is _F64 and z.strides[-1] == 8:
-            out = np.empty(self.size)
-            if self.batch:
-                z = z[0]
-            if self.call(self.x, self.P, z, *self.packed, out):
-                no_infinite_measurement(z, state.k + 1)  # raises, naming the step (as the general path)
-            if out[self.ok_row] and self.gate is None:  # ok is exactly 1.0 or 0.0: truth is the cheaper test
-                x, P = out[self.xs], out[self.Ps].reshape(self.nn)
-                new = _new(GaussianState)
-                d = new.__dict__  # as _new_state, inlined: a call is a tenth of this step
-                if self.batch:
-                    d["mean"] = x.reshape(self.bx)
-                    d["cov"] = P.reshape(self.bP)
-                else:
-                    d["mean"] = x
-                    d["cov"] = P
-                d["k"] = state.k + 1
-                d["memory"] = None
-                self.last = self.chained = new
-                self.x, self.P = x, P
-                return new, StepInfo(self, out, self.batch, False)
-            return self.finish(out, state.k + 1, self.batch)
-        return self.general(state, z, k, dt)
+    def filter_step(self, rest: Callable | None = None) -> Callable:
+        """``step(state, z, k=None, dt=None)``: one step by this lane, then by ``rest`` where the lane does not apply.
 
-    step = __call__  # what the filter calls (a method call costs less than calling the object)
+        A closure over the lane (a cell read costs what an attribute of
+        ``self`` does), so that a filter can hold it as its own ``step``
+        (:meth:`pursuit.filters.base.FilterBase._online_step`) and a tracking
+        loop's ``filt.step(state, z)`` is this one Python frame.  With
+        ``rest`` None it returns None where the lane does not apply: the
+        lane's :meth:`step`.
+        """
+        lane = self
+        general, finish = self.general, self.finish
+
+        def step(state: GaussianState, z: Any, k: int | None = None, dt: Any = None):
+            # the tracking loop's step first (the state this lane returned last, the model's own k and dt, z a
+            # float vector whose elements are adjacent): no branch of the general path is needed
+            if state is lane.chained and k is None and dt is None and type(z) is np.ndarray \
+                    and z.shape == lane.zshape and z.dtype is _F64 and z.strides[-1] == 8:
+                grid = np.empty(lane.grid)
+                out = grid.ravel()  # a view: grid is C-contiguous
+                batch = lane.batch
+                if batch:
+                    z = z[0]
+                code = lane.call(lane.x, lane.P, z, *lane.packed, out)  # 0; 1: z unusable; 2: a covariance does not factor
+                if not code and lane.gate is None:
+                    x, P = grid[0], grid[lane.prow]
+                    new = _new(GaussianState)
+                    d = new.__dict__  # as _new_state, inlined: a call is a tenth of this step
+                    if batch:
+                        d["mean"] = x.reshape(lane.bx)
+                        d["cov"] = P.reshape(lane.bP)
+                    else:
+                        d["mean"] = x
+                        d["cov"] = P
+                    d["k"] = state.k + 1
+                    d["memory"] = None
+                    lane.last = lane.chained = new
+                    lane.x, lane.P = x, P
+                    return new, StepInfo(lane, out, batch, False)
+                if code == 1:
+                    no_infinite_measurement(z, state.k + 1)  # raises, naming the step (as the general path)
+                got = finish(out, state.k + 1, batch)
+            else:
+                got = general(state, z, k, dt)
+            if got is None and rest is not None:
+                return rest(state, z, k, dt)
+            return got
+
+        return step
+
+    def __call__(self, state: GaussianState, z: Any, k: int | None, dt: Any):
+        """One step of one run, or None where the lane does not apply (the batched step then takes it)."""
+        return self.step(state, z, k, dt)
 
     def general(self, state: GaussianState, z: Any, k: int | None, dt: Any):
         """Any step the lane takes: a state it did not return, a given ``k`` or ``dt``, any ``z``."""
@@ -276,7 +313,7 @@ class _Lane:
             zw = z if z.flags.writeable else z.copy()  # the overload the lane calls is the one for writable arrays
             self.kernel(x, P, zw, *model, out)
             call = self.call = self.kernel.overloads[tuple(self.kernel.typeof_pyval(a) for a in (x, P, zw, *model, out))].entry_point
-        if call(x, P, z, *model, out):
+        if call(x, P, z, *model, out) == 1:
             no_infinite_measurement(z, k)  # raises, naming the step
         return self.finish(out, k, batch)
 

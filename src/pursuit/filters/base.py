@@ -23,7 +23,9 @@ A filter names its compiled implementation in one place, the class attribute
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass, field
+from types import MethodType
 from typing import Any, Callable, ClassVar
 
 import numpy as np
@@ -223,12 +225,34 @@ class FilterBase:
             factory = self._implementation().online if self._step_is_own() else None
             lane = None if factory is None else factory(self, self._specs)
             object.__setattr__(self, "_online_lane", lane)
+            if lane is not None:
+                self._take_lane_step(lane)
         return None if lane is None else lane(state, z, k, dt)
+
+    def _take_lane_step(self, lane: Any) -> None:
+        """Make the lane's step (falling back on :meth:`_step_without_lane`) this filter's own ``step``.
+
+        An instance attribute found before the class's method: a tracking
+        loop's ``filt.step(state, z)`` then runs the lane's Python frame only,
+        not the class step's too (about a tenth of a compiled KF step).  It
+        carries the class step's name, docstring and signature; pickling and
+        copying leave it out (:meth:`__getstate__`), and it is made again on
+        the copy's first step.
+        """
+        rest = getattr(self, "_step_without_lane", None)
+        if rest is None or not hasattr(lane, "filter_step"):
+            return  # a filter without the split of its step keeps calling the lane from its class step
+        cls_step = type(self).step
+        step = lane.filter_step(rest)
+        step.__name__, step.__qualname__, step.__doc__ = cls_step.__name__, cls_step.__qualname__, cls_step.__doc__
+        step.__signature__ = inspect.signature(MethodType(cls_step, self))
+        object.__setattr__(self, "step", step)
 
     def __getstate__(self) -> dict[str, Any]:
         # the online lane holds compiled entry points and the last state, made again where unpickled
         state = dict(self.__dict__)
         state.pop("_online_lane", None)
+        state.pop("step", None)  # the lane's step (_take_lane_step): made again with the lane
         for name in [name for name in state if name.startswith("_one_run_")]:
             del state[name]  # the one-run step's caches of model matrices: read again from the unpickled models
         return state

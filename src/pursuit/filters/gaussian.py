@@ -385,17 +385,24 @@ class _GaussianFilter(FilterBase):
             that makes ``S``, ``nis`` and ``loglik`` when first read (the
             compiled online lane's too).
         """
-        # compiled: one run first tries the online lane, which validates by itself; the lane is made by
-        # _online_step's first call, and looked up first (before _specs) since it is there on every later step
+        # compiled: one run first tries the online lane, which validates by itself.  The lane is made by
+        # _online_step's first call, which also makes the lane's step this filter's own ``step`` (an instance
+        # attribute, one Python frame per call): this class step then runs only where called as such
         lane = self.__dict__.get("_online_lane")
         if lane is not None:
-            fast = lane.step(state, z, k, dt)  # a method call: cheaper than calling the object (__call__)
+            fast = lane.step(state, z, k, dt)
             if fast is not None:
                 return fast
         elif self._specs is not None:
             fast = self._online_step(state, z, k, dt)
             if fast is not None:
                 return fast
+        return self._step_without_lane(state, z, k, dt)
+
+    def _step_without_lane(
+        self, state: GaussianState, z: np.ndarray, k: int | None, dt: float | None
+    ) -> tuple[GaussianState, MutableMapping[str, np.ndarray]]:
+        """:meth:`step` where the online lane does not apply (or there is none): the batched or NumPy step."""
         k = state.k + 1 if k is None else int(k)
         if dt is not None:
             dt = time_step(dt, k)
