@@ -236,3 +236,21 @@ def test_whole_run_detection_with_no_step_or_no_run_and_covariances():
     for K, batch in ((0, (3,)), (4, (0,)), (0, (5, 0)), (4, (2, 0))):
         got = detect_divergence(np.zeros((K, *batch)), 2, np.zeros((K, *batch, 3)), np.zeros((K, *batch, 3, 3)))
         assert got.shape == (K, *batch) and got.dtype == bool and not got.any()
+
+
+def test_not_finite_rows_when_the_whole_sum_is_not_finite():
+    """The one-sum shortcut of _not_finite_steps: a finite total clears every row; a total that overflows (every
+    entry finite) or holds NaN/±inf falls back to the row check, which flags exactly the rows with a bad entry."""
+    from pursuit.divergence import _not_finite_steps
+
+    values = np.ones((4, 3, 2))
+    assert not _not_finite_steps(values).any() and _not_finite_steps(values).shape == (4, 3)
+    values[:, :, 0] = 1e308  # every entry finite, the total overflows
+    assert not _not_finite_steps(values).any()
+    values[1, 2, 1] = np.inf
+    values[3, 0, 0] = -np.inf  # +inf and -inf make the total NaN
+    values[2, 1, 1] = np.nan
+    want = np.zeros((4, 3), dtype=bool)
+    want[1, 2] = want[3, 0] = want[2, 1] = True
+    assert np.array_equal(_not_finite_steps(values), want)
+    assert _not_finite_steps(np.zeros((0, 3, 2))).shape == (0, 3)

@@ -100,3 +100,18 @@ def test_a_state_of_the_wrong_size_names_the_model_size_and_every_shape():
     cloud = SimpleNamespace(particles=np.zeros((2, 50, 3)), mean=np.zeros((2, 4)), cov=np.zeros((2, 4, 4)))
     with pytest.raises(ValueError, match=r"got mean \(2, 4\), cov \(2, 4, 4\), particles \(2, 50, 3\)"):
         state_of_size(cloud, 4)
+
+
+def test_the_sequence_check_passes_missing_values_and_catches_a_bad_value_anywhere():
+    """The fast whole-array bounds (NaN skipped) agree with the step-by-step check: all-NaN and the limit itself pass,
+    one value beyond ±2^500 or one infinity anywhere (first or last step, either sign) names its step."""
+    from pursuit._validation import MAX_MEASUREMENT
+
+    no_infinite_measurements(np.full((3, 2, 2), np.nan))  # nothing measured: passes
+    no_infinite_measurements(np.array([[[MAX_MEASUREMENT, -MAX_MEASUREMENT]]]))
+    no_infinite_measurements(np.arange(12).reshape(3, 2, 2))  # integers
+    for step, value in [(0, np.inf), (0, -np.inf), (5, 1e151), (5, -1e151)]:
+        zs = np.full((6, 3, 2), np.nan)
+        zs[step, 2, 1] = value
+        with pytest.raises(ValueError, match=f"^step {step + 1}: measurement"):
+            no_infinite_measurements(zs)

@@ -285,8 +285,12 @@ def _not_finite_steps(values: np.ndarray) -> np.ndarray:
     A row with a NaN or an infinity sums to a non-finite value, so a finite
     sum clears a row in one product; the rare rows whose sum is not finite
     (an overflow of large finite entries among them) are checked entry by entry.
+    A finite sum of everything clears every row at once (the common case:
+    one pass, no temporary the size of the rows).
     """
     with np.errstate(over="ignore", invalid="ignore"):
+        if np.isfinite(np.add.reduce(values, axis=None)):
+            return np.zeros(values.shape[:2], dtype=bool)
         suspect = ~np.isfinite(values @ np.ones(values.shape[-1]))
     if suspect.any():
         rows = np.nonzero(suspect)
