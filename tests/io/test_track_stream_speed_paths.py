@@ -60,14 +60,16 @@ def _records(n: int = 600, seed: int = 1, turn_at: int | None = None) -> list[tu
     return list(zip(t.tolist(), np.round(x + rng.normal(0, 5, n), 3).tolist(), np.round(y + rng.normal(0, 5, n), 3).tolist()))
 
 
-def _csv(rows, *, missing=(), gap_after=None, bad_line=None) -> str:
-    """CSV text; ``missing`` row indices lose their y; after row ``gap_after`` the times jump by 37.25 s."""
+def _csv(rows, *, missing=(), empty=(), gap_after=None, bad_line=None) -> str:
+    """CSV text; ``missing`` row indices lose their y, ``empty`` ones both x and y (a prediction at a regular time);
+    after row ``gap_after`` the times jump by 37.25 s."""
     out = ["time,sensor,x,y"]
     shift = 0.0
     for i, (t, x, y) in enumerate(rows):
         if gap_after is not None and i == gap_after + 1:
             shift = 37.25
-        out.append(f"{t + shift!r},gps,{x!r},{'' if i in missing else repr(y)}")
+        xs = "" if i in empty else repr(x)
+        out.append(f"{t + shift!r},gps,{xs},{'' if i in missing or i in empty else repr(y)}")
         if bad_line is not None and len(out) == bad_line - 1:
             out.append(f"{t + shift + 0.5!r},gps,{x!r},12..5")
     return "\n".join(out) + "\n"
@@ -100,20 +102,23 @@ def small_chunks(monkeypatch):
 
 
 def _stepped(monkeypatch) -> None:
-    """The reference: every step by Tracker.update, as before blocks existed."""
+    """The reference: every step by Tracker.update, as before blocks existed (neither compiled path applies)."""
     monkeypatch.setattr(tracker_mod.Tracker, "update_sequence", lambda self, steps: None)
+    monkeypatch.setattr(tracker_mod.Tracker, "update_block", lambda self, times, zs, lines: None)
 
 
 # --------------------------------------------------------------------------
 # stream = batch = stepped, byte for byte
 # --------------------------------------------------------------------------
 @pytest.mark.parametrize("backend", ["numpy", "numba"])
-@pytest.mark.parametrize("case", ["regular", "missing+gap", "diverging"])
+@pytest.mark.parametrize("case", ["regular", "missing+gap", "diverging", "predictions+diverging"])
 def test_stream_equals_batch_and_the_stepped_reference_csv(tmp_path, monkeypatch, small_chunks, backend, case):
     _backend_available(backend)
-    q = 1e-4 if case == "diverging" else 0.01
-    rows = _records(500, turn_at=250 if case == "diverging" else None)
+    q = 1e-4 if "diverging" in case else 0.01
+    rows = _records(500, turn_at=250 if "diverging" in case else None)
     text = _csv(rows, missing={3, 70, 71, 300}, gap_after=140) if case == "missing+gap" else _csv(rows)
+    if case == "predictions+diverging":  # rows with nothing measured, at regular times: "predict" inside blocks
+        text = _csv(rows, missing={20}, empty={10, 11, 120, 400, 401, 499})
     code_s, stream = _run(tmp_path, text, "csv", backend, "stream", q=q)
     code_b, batch = _run(tmp_path, text, "csv", backend, "batch", q=q)
     with monkeypatch.context() as m:
@@ -123,8 +128,11 @@ def test_stream_equals_batch_and_the_stepped_reference_csv(tmp_path, monkeypatch
     assert stream == batch == ref
     body = stream.decode().splitlines()
     assert len(body) == 1 + len(rows)
-    if case == "diverging":
+    if "diverging" in case:
         assert "diverged" in body[-1] and "diverged" not in body[200]
+    if case == "predictions+diverging":
+        assert [i for i, line in enumerate(body[1:]) if "predict" in line] == [10, 11, 120, 400, 401, 499]
+        assert body[401].endswith("predict;diverged")
     if case == "missing+gap":
         assert body[1 + 141].startswith(repr(rows[141][0] + 37.25) + ",")
 

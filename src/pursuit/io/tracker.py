@@ -207,20 +207,30 @@ class Tracker:
         means, covs, var, nis, dof, flag_rows = result
         n = len(times)
         diverged = self.monitor.update_many(nis, dof)
+        # each row's flags as bits (the filter's flag keys, then "predict", then "diverged"): the names of each
+        # distinct pattern are made once, so a long flagged stretch (a diverged track) costs a lookup per row
+        columns = [np.asarray(row, dtype=bool) for row in flag_rows]
+        columns += [np.asarray(dof) == 0, np.asarray(diverged, dtype=bool)]
+        code = np.zeros(n, dtype=np.int64)
+        for bit, column in enumerate(columns):
+            code |= column.astype(np.int64) << bit
         flags: list[tuple[str, ...]] = [()] * n
-        marked = np.zeros(n, dtype=bool)
-        for row in flag_rows:
-            marked |= np.asarray(row, dtype=bool)
-        marked |= np.asarray(dof) == 0
-        marked |= np.asarray(diverged, dtype=bool)
-        for i in np.flatnonzero(marked).tolist():  # the rare rows with a flag, in _estimate's order
-            names = [key for key, row in zip(self._flag_keys, flag_rows) if row[i]]
-            if dof[i] == 0:
-                names.append("predict")
-            if diverged[i] and DIVERGED_KEY not in names:
-                names.append(DIVERGED_KEY)
-            flags[i] = tuple(names)
+        marked = np.flatnonzero(code)
+        if marked.size:
+            names = {c: self._flag_names(c) for c in np.unique(code[marked]).tolist()}
+            for i, c in zip(marked.tolist(), code[marked].tolist()):
+                flags[i] = names[c]
         return EstimateBlock(times, means, var, nis, dof, flags, lines, covs)
+
+    def _flag_names(self, code: int) -> tuple[str, ...]:
+        """The flags of a row whose bits are ``code`` (see :meth:`update_block`), in :meth:`_estimate`'s order."""
+        keys = self._flag_keys
+        names = [key for bit, key in enumerate(keys) if code >> bit & 1]
+        if code >> len(keys) & 1:
+            names.append("predict")
+        if code >> (len(keys) + 1) & 1 and DIVERGED_KEY not in names:
+            names.append(DIVERGED_KEY)
+        return tuple(names)
 
     def _sequence(self, times: np.ndarray, zs: np.ndarray):
         """The compiled sequence from the current state over ``zs`` at ``times``, advancing the tracker.
