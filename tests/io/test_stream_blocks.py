@@ -351,11 +351,7 @@ def test_write_block_writes_the_rows_of_write_on_awkward_values(fmt):
     dof[100:250] = [2] * 150
     block = EstimateBlock(times, means, var, nis, dof, flags, np.arange(n) + 2, np.zeros((n, d, d)))
     labels = ["x%", "%(y)s"]
-    rows, whole = io.StringIO(), io.StringIO()
-    writer = make_writer(fmt, rows, labels)
-    for i in range(n):
-        writer.write(Estimate(float(times[i]), means[i], var[i], float(nis[i]), dof[i], flags[i], (i + 2,), block.covs[i]))
-    make_writer(fmt, whole, labels).write_block(block)
+    rows, whole = _row_by_row_and_whole(fmt, block, labels)
     assert whole.getvalue() == rows.getvalue()
     assert "-0.0" in whole.getvalue() and "5e-324" in whole.getvalue() and "1e+300" in whole.getvalue()
     # one row and no rows: the header (CSV) and that row, the header alone
@@ -367,6 +363,17 @@ def test_write_block_writes_the_rows_of_write_on_awkward_values(fmt):
         part = EstimateBlock(times[:k], means[:k], var[:k], nis[:k], dof[:k], flags[:k], block.lines[:k], block.covs[:k])
         make_writer(fmt, out, labels).write_block(part)
         assert out.getvalue() == want
+
+
+def _row_by_row_and_whole(fmt: str, block: EstimateBlock, labels: list[str]) -> tuple[io.StringIO, io.StringIO]:
+    """The block written row by row (``write`` of each Estimate, the reference) and whole (``write_block``)."""
+    rows, whole = io.StringIO(), io.StringIO()
+    writer = make_writer(fmt, rows, labels)
+    for i in range(len(block.times)):
+        writer.write(Estimate(float(block.times[i]), block.means[i], block.var[i], float(block.nis[i]), block.dof[i],
+                              block.flags[i], (int(block.lines[i]),), block.covs[i]))
+    make_writer(fmt, whole, labels).write_block(block)
+    return rows, whole
 
 
 @pytest.mark.parametrize("fmt", ["csv", "jsonl"])
@@ -391,11 +398,7 @@ def test_write_block_writes_the_rows_of_write_on_repeated_values(fmt):
     flags[300] = ("diverged",)
     block = EstimateBlock(times, means, var, nis, dof, flags, np.arange(n) + 2, np.zeros((n, d, d)))
     labels = ["x", "y", "z"]
-    rows, whole = io.StringIO(), io.StringIO()
-    writer = make_writer(fmt, rows, labels)
-    for i in range(n):
-        writer.write(Estimate(float(times[i]), means[i], var[i], float(nis[i]), dof[i], flags[i], (i + 2,), block.covs[i]))
-    make_writer(fmt, whole, labels).write_block(block)
+    rows, whole = _row_by_row_and_whole(fmt, block, labels)
     assert whole.getvalue() == rows.getvalue()
     codes = [writers_mod._repeated_as_text(np.column_stack([times, means, var, nis]), j, [None] * (n * 8)) for j in range(8)]
     assert codes == ["%r", "%s", "%s", "%r", "%s", "%s", "%r", "%s"]  # the path under test was taken
