@@ -157,6 +157,7 @@ def floor_rows(steps: int = 20000, repeat: int = 5) -> list[tuple[str, float]]:
     x, P = s1.mean, s1.cov
     (c,) = lane.model(None)
     out = np.empty(lane.size)
+    grid = np.empty(lane.grid)
     call, kernel = lane.call, lane.kernel
     a = np.zeros(4)
 
@@ -184,8 +185,9 @@ def floor_rows(steps: int = 20000, repeat: int = 5) -> list[tuple[str, float]]:
         ("whole step through the lane's general path (k given)", general),
         ("kernel through numba's dispatcher (5 arguments)", lambda: kernel(x, P, z, c, out)),
         ("kernel through its entry point (what the lane calls)", lambda: call(x, P, z, c, out)),
-        ("np.empty of the output vector", lambda: np.empty(lane.size)),
-        ("state: two views and the GaussianState", lambda: _new_state(out[:4], out[8:24].reshape(4, 4), 1)),
+        ("np.empty of the output rows and their flat view", lambda: np.empty(lane.grid).ravel()),
+        ("state: an index and a slice of the output rows, and the GaussianState",
+         lambda: _new_state(grid[0], grid[lane.prow], 1)),
         ("info: StepInfo (lazy; nothing sliced)", lambda: StepInfo(lane, out, (), False)),
         ("reference: a + a on a 4-vector (NumPy ufunc call)", lambda: a + a),
     ]

@@ -9,8 +9,10 @@ cross-check (1e-9 relative).
 from __future__ import annotations
 
 import copy
+import gc
 import inspect
 import pickle
+import weakref
 
 import numpy as np
 import pytest
@@ -251,10 +253,9 @@ def test_scalar_kernels_give_the_block_kernels_bits(cls, label, meas, centre, fa
     # a covariance that does not factor is flagged alike (the lane then hands the step to the batched path)
     a, b = np.empty(lane.size), np.empty(lane.size)
     bad_P = -np.eye(4)
-    scalar(centre, bad_P, z, *packed, a)
-    block(centre, bad_P, z, *packed, b)
+    # and said by the return code (the lane's fast path reads no row for it)
+    assert scalar(centre, bad_P, z, *packed, a) == block(centre, bad_P, z, *packed, b) == 2
     assert a[lane.ok_row] == b[lane.ok_row] == 0.0
-    assert scalar(centre, bad_P, z, *packed, a) == 2  # said by the return code too: the lane reads no row for it
     # an infinite measurement is refused by both
     z_inf = np.full(m, np.inf)
     assert scalar(centre, COV0, z_inf, *packed, a) == block(centre, COV0, z_inf, *packed, b) == 1
@@ -294,21 +295,25 @@ def test_the_fast_path_equals_the_general_path():
 
 
 @pytest.mark.parametrize("cls", [pu.KalmanFilter, pu.UnscentedKalmanFilter])
-def test_a_covariance_that_does_not_factor_on_the_fast_path_goes_to_the_batched_step(cls):
+@pytest.mark.parametrize("batch", [(), (1,)])
+@pytest.mark.parametrize("gate", [None, 0.99])
+def test_a_covariance_that_does_not_factor_on_the_fast_path_goes_to_the_batched_step(cls, batch, gate):
     """A chained state whose covariance was overwritten in place (not positive definite): the kernel says so by its
     return code and the batched step takes the step (the UKF's repair), as on the general path and as the NumPy step."""
     bad = np.diag([1.0, -2.0, 1.0, 1.0])  # the predicted covariance does not factor either
-    filt, ref = _filters(cls, LINEAR)
-    z1, z2 = np.array([10.0, 40.0]), np.array([11.0, 40.5])
+    filt, ref = _filters(cls, LINEAR, gate=gate)
+    z1, z2 = np.array([10.0, 40.0]).reshape(batch + (2,)), np.array([11.0, 40.5]).reshape(batch + (2,))
     if cls is pu.KalmanFilter:  # the generated kernel: a covariance whose innovation covariance does not factor
         bad = np.diag([-5.0, 0.5, 1.0, 0.5])
-    s, _ = filt.step(filt.init(pu.Gaussian(X0, COV0)), z1)
+    s, _ = filt.step(filt.init(pu.Gaussian(X0, COV0), batch=batch), z1)
     s.cov[...] = bad
     fast, fast_info = filt.step(s, z2)  # s is the lane's last state: the fast path
     general, general_info = filt.step(s, z2, k=2)
-    want, want_info = ref.step(pu.filters.GaussianState(mean=s.mean.copy(), cov=bad.copy(), k=1), z2)
+    mean, cov = s.mean.copy(), np.broadcast_to(bad, s.cov.shape).copy()
+    want, want_info = ref.step(pu.filters.GaussianState(mean=mean, cov=cov, k=1), z2)
     assert not isinstance(fast_info, StepInfo)  # the batched step's info: the lane handed the step over
-    assert bool(fast_info["repaired"]) == bool(want_info["repaired"]) == (cls is pu.UnscentedKalmanFilter)
+    assert bool(np.all(fast_info["repaired"])) == bool(np.all(want_info["repaired"])) == (cls is pu.UnscentedKalmanFilter)
+    assert np.array_equal(fast_info["gated"], want_info["gated"])
     assert np.array_equal(fast.mean, general.mean) and np.array_equal(fast.cov, general.cov)
     np.testing.assert_allclose(fast.mean, want.mean, rtol=1e-9)
     np.testing.assert_allclose(fast.cov, want.cov, rtol=1e-9, atol=1e-12)
@@ -328,10 +333,21 @@ def test_the_lanes_step_becomes_the_filters_own(name, cls, meas):
     a, _ = filt.step(s, z, 2, None)  # positional k and dt, as the class step takes them
     b, _ = ref.step(s, z, k=2)
     np.testing.assert_allclose(a.mean, b.mean, rtol=1e-9)
+    assert inspect.ismethod(filt.step) and filt.step.__self__ is filt
     for other in (copy.copy(filt), copy.deepcopy(filt), pickle.loads(pickle.dumps(filt))):
         assert "step" not in vars(other) and "_online_lane" not in vars(other)
         c, _ = other.step(s, z, k=2)
         assert np.array_equal(c.mean, a.mean) and "step" in vars(other)
+    # the bound step pickles as a method does, by name: the class step of the unpickled filter
+    unpickled = pickle.loads(pickle.dumps(filt.step))
+    assert "step" not in vars(unpickled.__self__)
+    c, _ = unpickled(s, z, k=2)
+    assert np.array_equal(c.mean, a.mean)
+    # no cycle through the lane: a dropped filter is freed by the cyclic collector
+    gone = weakref.ref(filt)
+    del filt, other, unpickled
+    gc.collect()
+    assert gone() is None
 
     class Own(cls):
         def step(self, state, z, k=None, dt=None):

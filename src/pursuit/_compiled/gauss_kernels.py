@@ -886,28 +886,28 @@ def _one_setup(x, P, z, out):
 
 @njit(**_NJ)
 def _one_finish(out, outs):
+    """dof and ok into the last two rows of ``out``; the return code of :func:`ekf_one` / :func:`sigma_one`."""
     k = out.shape[0] - 2
     out[k] = outs.dof[0]
     out[k + 1] = 1.0 if outs.ok[0] else 0.0
+    return 0 if outs.ok[0] else 2
 
 
 @njit(**_NJ)
 def ekf_one(x, P, z, prediction, sensor, out):
-    """One KF/EKF step of one run: :func:`ekf_step_serial` on one lane, its results in ``out``; 1 if ``z`` is unusable, else 0."""
+    """One KF/EKF step of one run: :func:`ekf_step_serial` on one lane, its results in ``out``; 1 if ``z`` is unusable, 2 if a covariance does not factor, else 0."""
     state, obs, outs, bad = _one_setup(x, P, z, out)
     if bad:
         return 1
     ekf_step_serial(state, obs, prediction, sensor, outs)
-    _one_finish(out, outs)
-    return 0
+    return _one_finish(out, outs)
 
 
 @njit(**_NJ)
 def sigma_one(x, P, z, prediction, sensor, sigma, out):
-    """One UKF/CKF step of one run: :func:`sigma_step_serial` on one lane, its results in ``out``; 1 if ``z`` is unusable, else 0."""
+    """One UKF/CKF step of one run: :func:`sigma_step_serial` on one lane, its results in ``out``; 1 if ``z`` is unusable, 2 if a covariance does not factor, else 0."""
     state, obs, outs, bad = _one_setup(x, P, z, out)
     if bad:
         return 1
     sigma_step_serial(state, obs, prediction, sensor, sigma, outs)
-    _one_finish(out, outs)
-    return 0
+    return _one_finish(out, outs)

@@ -200,7 +200,6 @@ class _Lane:
         assert self.px % n == 0
         self.grid = (-(-self.size // n), n)
         self.prow = slice(self.px // n, self.px // n + n)
-        self.step = self.filter_step()  # what the filter's class step calls: None where the lane does not apply
 
     def model(self, dt: float | None) -> tuple | None:
         """The kernel's model arguments at ``dt`` (None: the motion model's own), or None where the lane does not apply."""
@@ -231,20 +230,19 @@ class _Lane:
             return None
         return np.array(mean.reshape(n), dtype=float), np.array(cov.reshape(n, n), dtype=float), batch
 
-    def filter_step(self, rest: Callable | None = None) -> Callable:
-        """``step(state, z, k=None, dt=None)``: one step by this lane, then by ``rest`` where the lane does not apply.
+    def filter_step(self) -> Callable:
+        """``step(filt, state, z, k=None, dt=None)``: one step by this lane, else by ``filt._step_without_lane``.
 
-        A closure over the lane (a cell read costs what an attribute of
-        ``self`` does), so that a filter can hold it as its own ``step``
-        (:meth:`pursuit.filters.base.FilterBase._online_step`) and a tracking
-        loop's ``filt.step(state, z)`` is this one Python frame.  With
-        ``rest`` None it returns None where the lane does not apply: the
-        lane's :meth:`step`.
+        A function over the lane (a cell read costs what an attribute of
+        ``self`` does) that the filter binds to itself as its own ``step``
+        (:meth:`pursuit.filters.base.FilterBase._take_lane_step`), so a
+        tracking loop's ``filt.step(state, z)`` is this one Python frame.
+        It holds no reference to the filter (the bound method does).
         """
         lane = self
         general, finish = self.general, self.finish
 
-        def step(state: GaussianState, z: Any, k: int | None = None, dt: Any = None):
+        def step(filt, state: GaussianState, z: Any, k: int | None = None, dt: Any = None):
             # the tracking loop's step first (the state this lane returned last, the model's own k and dt, z a
             # float vector whose elements are adjacent): no branch of the general path is needed
             if state is lane.chained and k is None and dt is None and type(z) is np.ndarray \
@@ -275,15 +273,15 @@ class _Lane:
                 got = finish(out, state.k + 1, batch)
             else:
                 got = general(state, z, k, dt)
-            if got is None and rest is not None:
-                return rest(state, z, k, dt)
-            return got
+            return filt._step_without_lane(state, z, k, dt) if got is None else got
 
         return step
 
     def __call__(self, state: GaussianState, z: Any, k: int | None, dt: Any):
-        """One step of one run, or None where the lane does not apply (the batched step then takes it)."""
-        return self.step(state, z, k, dt)
+        """One step of one run (the general path), or None where the lane does not apply (the batched step then takes it)."""
+        return self.general(state, z, k, dt)
+
+    step = __call__  # what the filter's class step calls (a method call costs less than calling the object)
 
     def general(self, state: GaussianState, z: Any, k: int | None, dt: Any):
         """Any step the lane takes: a state it did not return, a given ``k`` or ``dt``, any ``z``."""

@@ -230,23 +230,25 @@ class FilterBase:
         return None if lane is None else lane(state, z, k, dt)
 
     def _take_lane_step(self, lane: Any) -> None:
-        """Make the lane's step (falling back on :meth:`_step_without_lane`) this filter's own ``step``.
+        """Bind the lane's step (falling back on :meth:`_step_without_lane`) to this filter as its own ``step``.
 
-        An instance attribute found before the class's method: a tracking
-        loop's ``filt.step(state, z)`` then runs the lane's Python frame only,
-        not the class step's too (about a tenth of a compiled KF step).  It
-        carries the class step's name, docstring and signature; pickling and
-        copying leave it out (:meth:`__getstate__`), and it is made again on
-        the copy's first step.
+        An instance attribute, a bound method found before the class's: a
+        tracking loop's ``filt.step(state, z)`` then runs the lane's Python
+        frame only, not the class step's too (about a tenth of a compiled KF
+        step).  It has the class step's name, docstring and signature, and
+        pickles as the class step does (by name: the unpickled filter makes
+        its own lane); copies and pickles of the filter leave it out
+        (:meth:`__getstate__`).  A patch of the class's ``step`` (``mock``)
+        does not reach a filter that has stepped; the bound method refers to
+        its filter, a cycle that Python's cyclic garbage collector frees.
         """
-        rest = getattr(self, "_step_without_lane", None)
-        if rest is None or not hasattr(lane, "filter_step"):
+        if getattr(self, "_step_without_lane", None) is None or not hasattr(lane, "filter_step"):
             return  # a filter without the split of its step keeps calling the lane from its class step
         cls_step = type(self).step
-        step = lane.filter_step(rest)
+        step = lane.filter_step()
         step.__name__, step.__qualname__, step.__doc__ = cls_step.__name__, cls_step.__qualname__, cls_step.__doc__
-        step.__signature__ = inspect.signature(MethodType(cls_step, self))
-        object.__setattr__(self, "step", step)
+        step.__signature__ = inspect.signature(cls_step)
+        object.__setattr__(self, "step", MethodType(step, self))
 
     def __getstate__(self) -> dict[str, Any]:
         # the online lane holds compiled entry points and the last state, made again where unpickled
