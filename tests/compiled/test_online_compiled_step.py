@@ -429,3 +429,49 @@ def test_a_state_of_the_wrong_size_is_refused(name, cls, meas, batch):
         filt.step(state, z)
     good, _ = filt.step(filt.init(pu.Gaussian(X0, COV0), batch=batch), z)  # and the lane goes on as before
     assert good.mean.shape == batch + (4,)
+
+
+def test_two_threads_stepping_one_filter_each_get_their_own_runs():
+    """One filter stepped from two threads, a run each: every step equals the run stepped alone (the lane reads what
+    it keeps of the last step as one tuple, never one run's state with the other's arrays)."""
+    import sys
+    import threading
+
+    filt, _ = _filters(pu.KalmanFilter, LINEAR)
+    steps = 400
+    rng = np.random.default_rng(4)
+    zs = [rng.normal([10.0, 40.0], 5.0, (steps, 2)), rng.normal([-300.0, 900.0], 5.0, (steps, 2))]
+    alone = []
+    for run in range(2):
+        ref, _ = _filters(pu.KalmanFilter, LINEAR)
+        s = ref.init(pu.Gaussian(X0, COV0))
+        means = []
+        for z in zs[run]:
+            s, _ = ref.step(s, z)
+            means.append(s.mean)
+        alone.append(np.array(means))
+    got = [None, None]
+    start = threading.Barrier(2)
+
+    def track(run):
+        s = filt.init(pu.Gaussian(X0, COV0))
+        means = []
+        start.wait()
+        for z in zs[run]:
+            s, _ = filt.step(s, z)
+            means.append(s.mean)
+        got[run] = np.array(means)
+
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # switch threads as often as the interpreter can
+    try:
+        for _ in range(5):
+            threads = [threading.Thread(target=track, args=(run,)) for run in range(2)]
+            for t in threads:
+                t.start()
+            for t in threads:
+                t.join()
+            for run in range(2):
+                assert np.array_equal(got[run], alone[run]), run
+    finally:
+        sys.setswitchinterval(interval)

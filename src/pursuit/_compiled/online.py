@@ -35,8 +35,8 @@ The step of a tracking loop (the state the lane returned last, no ``k`` or
 ``dt``, ``z`` a float64 vector of the run's shape) takes a fast path in the
 step :meth:`_Lane.filter_step` makes, which skips every branch of the
 general path (:meth:`_Lane.general`); both give the same bits.  That step is
-also the filter's own ``step`` once the lane is made (an instance attribute
-that falls back on the filter's batched step where the lane does not apply:
+also the filter's own ``step`` once the lane is made (a method bound to the
+filter as an attribute, falling back on its batched step where the lane does not apply:
 :meth:`pursuit.filters.base.FilterBase._take_lane_step`), so the loop's
 ``filt.step(state, z)`` is one Python frame; the kernel says by its return
 code whether the step needs the batched path (a covariance that does not
@@ -179,13 +179,12 @@ class _Lane:
         self.gate = filt.gate
         self.kernel, self.pack = kernel, pack
         self.call: Callable | None = None
-        # the state the last step returned, its x and P as the kernel takes them, its batch; ``chained`` is
-        # that state where the next step may take the fast path (the model at the default dt is packed)
-        self.last = self.chained = None
-        self.x = self.P = None
-        self.batch: tuple[int, ...] | None = None
-        self.zshape = self.bx = self.bP = None
-        self.packed: tuple | None = None
+        # what the next step needs of the last one, in one tuple that a step reads and replaces as a whole (so
+        # two threads stepping one filter each read a consistent one, never one run's state with another's
+        # arrays): the state the last step returned, its x and P as the kernel takes them, its batch, the
+        # packed model at the default dt (None: not known, or the lane does not apply at it; the fast path
+        # then does not apply either), and the shapes of z, x and P with that batch
+        self.chain: tuple = (None,) * 8
         self.nn = (n, n)
         self.models: dict[float | None, tuple | None] = {}
         rows = kf_codegen.step_rows(n, self.m)
@@ -245,28 +244,27 @@ class _Lane:
         def step(filt, state: GaussianState, z: Any, k: int | None = None, dt: Any = None):
             # the tracking loop's step first (the state this lane returned last, the model's own k and dt, z a
             # float vector whose elements are adjacent): no branch of the general path is needed
-            if state is lane.chained and k is None and dt is None and type(z) is np.ndarray \
-                    and z.shape == lane.zshape and z.dtype is _F64 and z.strides[-1] == 8:
+            last, x0, P0, batch, packed, zshape, bx, bP = lane.chain
+            if state is last and packed is not None and k is None and dt is None and type(z) is np.ndarray \
+                    and z.shape == zshape and z.dtype is _F64 and z.strides[-1] == 8:
                 grid = np.empty(lane.grid)
                 out = grid.ravel()  # a view: grid is C-contiguous
-                batch = lane.batch
                 if batch:
                     z = z[0]
-                code = lane.call(lane.x, lane.P, z, *lane.packed, out)  # 0; 1: z unusable; 2: a covariance does not factor
+                code = lane.call(x0, P0, z, *packed, out)  # 0; 1: z unusable; 2: a covariance does not factor
                 if not code and lane.gate is None:
                     x, P = grid[0], grid[lane.prow]
                     new = _new(GaussianState)
                     d = new.__dict__  # as _new_state, inlined: a call is a tenth of this step
                     if batch:
-                        d["mean"] = x.reshape(lane.bx)
-                        d["cov"] = P.reshape(lane.bP)
+                        d["mean"] = x.reshape(bx)
+                        d["cov"] = P.reshape(bP)
                     else:
                         d["mean"] = x
                         d["cov"] = P
                     d["k"] = state.k + 1
                     d["memory"] = None
-                    lane.last = lane.chained = new
-                    lane.x, lane.P = x, P
+                    lane.chain = (new, x, P, batch, packed, zshape, bx, bP)
                     return new, StepInfo(lane, out, batch, False)
                 if code == 1:
                     no_infinite_measurement(z, state.k + 1)  # raises, naming the step (as the general path)
@@ -286,9 +284,8 @@ class _Lane:
     def general(self, state: GaussianState, z: Any, k: int | None, dt: Any):
         """Any step the lane takes: a state it did not return, a given ``k`` or ``dt``, any ``z``."""
         k = state.k + 1 if k is None else int(k)
-        if state is self.last:
-            x, P, batch = self.x, self.P, self.batch
-        else:
+        last, x, P, batch = self.chain[:4]
+        if state is not last:
             got = self.start(state)
             if got is None:
                 return None
@@ -334,14 +331,9 @@ class _Lane:
 
     def remember(self, state: GaussianState, x: np.ndarray, P: np.ndarray, batch: tuple[int, ...]) -> None:
         """Keep the state a step returned (and its arrays as the kernel takes them) for the next step's fast path."""
-        self.last, self.x, self.P = state, x, P
-        if batch != self.batch:
-            self.batch = batch
-            self.zshape = batch + (self.m,)
-            self.bx, self.bP = batch + (self.n,), batch + self.nn
         # the fast path steps with the model's own dt: only once its packed model is known (and applies)
-        self.packed = self.models.get(None)
-        self.chained = None if self.packed is None else state
+        shapes = (batch + (self.m,), batch + (self.n,), batch + self.nn)
+        self.chain = (state, x, P, batch, self.models.get(None), *shapes)
 
     def gated(self, out: np.ndarray, x_new: np.ndarray, P_new: np.ndarray):
         """The χ² gate of the batched step (:func:`pursuit.filters.gating.apply_gate`) on one run."""
