@@ -229,14 +229,15 @@ class _Lane:
             return None
         return np.array(mean.reshape(n), dtype=float), np.array(cov.reshape(n, n), dtype=float), batch
 
-    def filter_step(self) -> Callable:
-        """``step(filt, state, z, k=None, dt=None)``: one step by this lane, else by ``filt._step_without_lane``.
+    def filter_step(self, rest: Callable) -> Callable:
+        """``step(filt, state, z, k=None, dt=None)``: one step by this lane, else ``rest(filt, state, z, k, dt)``.
 
         A function over the lane (a cell read costs what an attribute of
         ``self`` does) that the filter binds to itself as its own ``step``
         (:meth:`pursuit.filters.base.FilterBase._take_lane_step`), so a
         tracking loop's ``filt.step(state, z)`` is this one Python frame.
-        It holds no reference to the filter (the bound method does).
+        ``rest`` is the filter class's step without the lane (a function,
+        not bound: this holds no reference to the filter, the bound method does).
         """
         lane = self
         general, finish = self.general, self.finish
@@ -271,7 +272,7 @@ class _Lane:
                 got = finish(out, state.k + 1, batch)
             else:
                 got = general(state, z, k, dt)
-            return filt._step_without_lane(state, z, k, dt) if got is None else got
+            return rest(filt, state, z, k, dt) if got is None else got
 
         return step
 

@@ -242,10 +242,11 @@ class FilterBase:
         does not reach a filter that has stepped; the bound method refers to
         its filter, a cycle that Python's cyclic garbage collector frees.
         """
-        if getattr(self, "_step_without_lane", None) is None or not hasattr(lane, "filter_step"):
+        rest = getattr(type(self), "_step_without_lane", None)
+        if rest is None or not hasattr(lane, "filter_step"):
             return  # a filter without the split of its step keeps calling the lane from its class step
         cls_step = type(self).step
-        step = lane.filter_step()
+        step = lane.filter_step(rest)
         step.__name__, step.__qualname__, step.__doc__ = cls_step.__name__, cls_step.__qualname__, cls_step.__doc__
         step.__signature__ = inspect.signature(cls_step)
         object.__setattr__(self, "step", MethodType(step, self))
