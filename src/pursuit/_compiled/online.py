@@ -192,7 +192,6 @@ class _Lane:
         self.size = sum(c for _, c in rows.values())
         self.px = rows["P"][0]
         self.pn = self.px + n * n
-        self.ok_row = rows["ok"][0]
         # the fast path allocates out as rows of n (x is row 0, P rows px/n onward: step_rows puts both on a
         # multiple of n) and hands the kernel its flat view: an index and a slice then give x (n,) and P (n, n),
         # cheaper than slicing a flat vector and reshaping (a third of a microsecond of a two-microsecond step)
@@ -269,7 +268,7 @@ class _Lane:
                     return new, StepInfo(lane, out, batch, False)
                 if code == 1:
                     no_infinite_measurement(z, state.k + 1)  # raises, naming the step (as the general path)
-                got = finish(out, state.k + 1, batch)
+                got = finish(out, code, state.k + 1, batch)
             else:
                 got = general(state, z, k, dt)
             return rest(filt, state, z, k, dt) if got is None else got
@@ -309,13 +308,14 @@ class _Lane:
             zw = z if z.flags.writeable else z.copy()  # the overload the lane calls is the one for writable arrays
             self.kernel(x, P, zw, *model, out)
             call = self.call = self.kernel.overloads[tuple(self.kernel.typeof_pyval(a) for a in (x, P, zw, *model, out))].entry_point
-        if call(x, P, z, *model, out) == 1:
+        code = call(x, P, z, *model, out)
+        if code == 1:
             no_infinite_measurement(z, k)  # raises, naming the step
-        return self.finish(out, k, batch)
+        return self.finish(out, code, k, batch)
 
-    def finish(self, out: np.ndarray, k: int, batch: tuple[int, ...]):
-        """The state and info of a step whose kernel wrote ``out``, or None where the batched step must repair."""
-        if out[self.ok_row] == 0.0:
+    def finish(self, out: np.ndarray, code: int, k: int, batch: tuple[int, ...]):
+        """The state and info of a step whose kernel wrote ``out`` and returned ``code``, or None where the batched step must repair."""
+        if code == 2:
             return None  # a covariance does not factor: the batched step repairs it with NumPy
         n = self.n
         x_new = out[:n]

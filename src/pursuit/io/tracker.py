@@ -217,8 +217,9 @@ class Tracker:
         flags: list[tuple[str, ...]] = [()] * n
         marked = np.flatnonzero(code)
         if marked.size:
-            names = {c: self._flag_names(c) for c in np.unique(code[marked]).tolist()}
-            for i, c in zip(marked.tolist(), code[marked].tolist()):
+            codes = code[marked].tolist()
+            names = {c: self._flag_names(c) for c in set(codes)}
+            for i, c in zip(marked.tolist(), codes):
                 flags[i] = names[c]
         return EstimateBlock(times, means, var, nis, dof, flags, lines, covs)
 
