@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from pursuit._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, numerical_jacobian, psd_factor
+from pursuit._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, numerical_jacobian, psd_factor, quad, quadratic_form
 
 
 @given(st.integers(1, 5), st.integers(0, 2**31 - 1))
@@ -23,6 +23,37 @@ def test_inverse_is_batch_invariant_bitwise(rng):
     full = inv_spd(S)
     for i in range(0, 50, 7):
         np.testing.assert_array_equal(inv_spd(S[i : i + 7]), full[i : i + 7])
+
+
+@given(st.integers(1, 6), st.integers(0, 2**31 - 1))
+def test_quadratic_form_matches_einsum(n, seed):
+    """x^T A x for a batch of vectors against one shared matrix, and against a matrix per vector (broadcast)."""
+    r = np.random.default_rng(seed)
+    x = r.standard_normal((3, 5, n))
+    A_shared = r.standard_normal((n, n))
+    A_each = r.standard_normal((5, n, n))  # broadcast over the leading axis of x
+    np.testing.assert_allclose(quadratic_form(x, A_shared), np.einsum("...i,ij,...j->...", x, A_shared, x), rtol=1e-12, atol=1e-12)
+    want = np.einsum("bki,kij,bkj->bk", x, A_each, x)
+    np.testing.assert_allclose(quadratic_form(x, A_each), want, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(quad(x, np.broadcast_to(A_each, (3, 5, n, n))), want, rtol=1e-12, atol=1e-12)
+
+
+def test_quadratic_form_is_batch_invariant_bitwise_and_keeps_nan(rng):
+    x = rng.standard_normal((40, 7, 3))
+    A = rng.standard_normal((40, 1, 3, 3))
+    full = quadratic_form(x, A)
+    assert full.shape == (40, 7)
+    for i in range(0, 40, 9):
+        np.testing.assert_array_equal(quadratic_form(x[i : i + 9], A[i : i + 9]), full[i : i + 9])
+    x[3, 2, 1] = np.nan
+    out = quadratic_form(x, A)
+    assert np.isnan(out[3, 2]) and np.isfinite(np.delete(out.ravel(), 3 * 7 + 2)).all()
+
+
+def test_quadratic_form_rejects_mismatched_sizes_and_sums_nothing_for_n_0():
+    with pytest.raises(ValueError, match="A must end in"):
+        quadratic_form(np.ones((4, 3)), np.ones((2, 2)))
+    assert np.array_equal(quadratic_form(np.ones((4, 0)), np.ones((0, 0))), np.zeros(4))
 
 
 def test_cholesky_psd_repairs_only_broken_matrices():

