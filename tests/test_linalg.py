@@ -1,5 +1,7 @@
 """Small batched linear algebra: closed forms against LAPACK, repair, batch invariance."""
 
+import warnings
+
 import numpy as np
 import pytest
 from hypothesis import given
@@ -48,6 +50,22 @@ def test_quadratic_form_is_batch_invariant_bitwise_and_keeps_nan(rng):
     x[3, 2, 1] = np.nan
     out = quadratic_form(x, A)
     assert np.isnan(out[3, 2]) and np.isfinite(np.delete(out.ravel(), 3 * 7 + 2)).all()
+
+
+def test_quadratic_form_passes_inf_and_nan_through_without_warnings_and_leaves_its_inputs():
+    """As einsum did: an overflow gives inf, an inf input NaN or inf, with no RuntimeWarning (errors in pursuit's tests)."""
+    x = np.array([[1e200, 1e200], [np.inf, 1.0], [1.0, 2.0]])
+    A = np.eye(2)
+    x0, A0 = x.copy(), A.copy()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = quadratic_form(x, A)
+    with np.errstate(all="ignore"):
+        want = np.einsum("...i,ij,...j->...", x, A, x)
+    np.testing.assert_array_equal(got, want)
+    assert np.isinf(got[0]) and got[2] == 5.0
+    np.testing.assert_array_equal(x, x0)
+    np.testing.assert_array_equal(A, A0)
 
 
 def test_quadratic_form_rejects_mismatched_sizes_and_sums_nothing_for_n_0():

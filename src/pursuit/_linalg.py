@@ -85,21 +85,23 @@ def quadratic_form(x: np.ndarray, A: np.ndarray) -> np.ndarray:
     loop that costs 6-9x more on the stacks the trackers make (PMHT residuals
     ``(M, L, B, D, 2)``, 2-4-dimensional innovations).  Every entry is summed
     in the same order whatever the batch, so the result is batch-invariant.
-    Meant for small n: the cost grows as n² array passes.
+    Meant for small n: the cost grows as n² array passes.  Overflow and
+    invalid operations give inf and NaN without a warning, as ``einsum`` does.
     """
     n = x.shape[-1]
     if A.shape[-2:] != (n, n):
         raise ValueError(f"quadratic_form: A must end in ({n}, {n}) to match x, got shape {A.shape}")
     out = None
-    for j in range(n):
-        t = x[..., 0] * A[..., 0, j]
-        for i in range(1, n):
-            t += x[..., i] * A[..., i, j]
-        t *= x[..., j]
-        if out is None:
-            out = t
-        else:
-            out += t
+    with np.errstate(over="ignore", invalid="ignore"):  # inf and NaN pass through silently, as through einsum
+        for j in range(n):
+            t = x[..., 0] * A[..., 0, j]
+            for i in range(1, n):
+                t += x[..., i] * A[..., i, j]
+            t *= x[..., j]
+            if out is None:
+                out = t
+            else:
+                out += t
     if out is None:  # n = 0: the empty sum
         return np.zeros(np.broadcast_shapes(x.shape[:-1], A.shape[:-2]))
     return out

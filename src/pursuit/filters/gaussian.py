@@ -1253,7 +1253,9 @@ class _SigmaPointFilter(_GaussianFilter):
         # averaged on the circle, not across the ±π cut.
         Z0 = Z[..., :1, :]
         zp = Z0[..., 0, :] + np.matmul(wm, _residual(self.measurement, Z, Z0))
-        dZ = _residual(self.measurement, Z, zp[..., None, :])
+        # Contiguous, so that each run's small GEMMs below see the same layout whatever the batch
+        # (a user's h may return runs as the fastest axis; a batch of one is always contiguous).
+        dZ = np.ascontiguousarray(_residual(self.measurement, Z, zp[..., None, :]))
         dX = chi - x_pred[..., None, :]
         Pzz = _t(dZ * wc[:, None]) @ dZ
         Pxz = _t(dX * wc[:, None]) @ dZ

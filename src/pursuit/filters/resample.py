@@ -91,7 +91,9 @@ def gather(values: np.ndarray, idx: np.ndarray) -> np.ndarray:
     """Select particles per row: ``values (*batch, N, ...)``, ``idx (*batch, K)`` -> ``(*batch, K, ...)``.
 
     Whole rows are copied by one flat take (about twice as fast as
-    ``np.take_along_axis``, which indexes every element); the same values.
+    ``np.take_along_axis``, which indexes every element); the same values
+    for ``0 ≤ idx < N``, which the callers guarantee (a negative index is
+    not checked here and would read a neighbouring row of the flat array).
     """
     batch = idx.shape[:-1]
     N = values.shape[len(batch)]
