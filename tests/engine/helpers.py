@@ -221,3 +221,18 @@ class SlowButOnce(_WrappedScenario):
         except FileExistsError:
             time.sleep(self.delay_s)
         return self.inner.simulate(rng, runs)
+
+
+def half_sent_result(seconds: float = 600.0) -> None:
+    """A pool task that writes the first bytes of a result message to the pool's result pipe, then sleeps.
+
+    It stands for a worker stopped while it sends a large result: the pool's
+    thread in the parent reads the message's length and waits for the rest.
+    """
+    import gc
+    import multiprocessing.queues
+    import struct
+
+    queue = next(o for o in gc.get_objects() if isinstance(o, multiprocessing.queues.SimpleQueue))
+    os.write(queue._writer.fileno(), struct.pack("!i", 1000) + b"x" * 10)  # multiprocessing's framing: length, then bytes
+    time.sleep(seconds)

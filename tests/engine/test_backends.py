@@ -320,3 +320,52 @@ def test_workers_end_when_their_parent_is_killed(tmp_path):
         assert wait_until(lambda: not session_pids(proc.pid), 20), f"still alive: {session_pids(proc.pid)}"
     finally:
         end_session(proc)
+
+
+_HALF_SENT = """
+import sys, time
+from pursuit.engine.backends import LocalProcesses
+from tests.engine.helpers import half_sent_result
+
+def reading():  # the pool's thread is inside a result's recv, waiting for the rest of the message
+    for frame in sys._current_frames().values():
+        while frame is not None:
+            if frame.f_code.co_name == "_recv_bytes":
+                return True
+            frame = frame.f_back
+    return False
+
+backend = LocalProcesses(1)
+backend._executor().submit(half_sent_result)
+deadline = time.monotonic() + 60
+while not reading():
+    assert time.monotonic() < deadline, "the pool's thread never started reading the result"
+    time.sleep(0.05)
+started = time.monotonic()
+backend.terminate()
+print(f"terminated in {time.monotonic() - started:.1f} s")
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the result pipe's framing and forkserver are POSIX")
+def test_terminate_returns_when_a_worker_was_stopped_halfway_through_sending_a_result(tmp_path):
+    """A worker stopped while it sends a result left the pool's thread waiting for the rest for ever, and
+    ``terminate`` (Ctrl-C, SIGTERM, SIGHUP with --workers) waiting for that thread: the CLI hung (CI caught
+    it, about 1 run in 40-150).  In a subprocess, so that a hang fails this test instead of the test run."""
+    import subprocess
+    from pathlib import Path
+
+    from .helpers import end_session
+
+    root = Path(__file__).resolve().parents[2]
+    proc = subprocess.Popen([sys.executable, "-c", _HALF_SENT], cwd=root, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, start_new_session=True)
+    try:
+        out, _ = proc.communicate(timeout=90)
+    except subprocess.TimeoutExpired:
+        end_session(proc)
+        pytest.fail("terminate() did not return: the pool's thread still waits for the half-sent result")
+    finally:
+        end_session(proc)
+    assert proc.returncode == 0, out
+    assert out.startswith("terminated in"), out

@@ -238,6 +238,24 @@ class _RecordingContext:
         return [p for p in self.made if p.pid is not None and p.exitcode is None]
 
 
+def _close_result_writer(pool: ProcessPoolExecutor) -> None:
+    """Close this process's write end of the pool's result pipe, once every worker is gone.
+
+    A worker stopped while it was sending a result (a chunk's arrays are
+    megabytes, written in pieces) leaves the pool's own thread reading the
+    rest of that message for ever: this process holds the pipe's write end
+    too, so no end of file comes, and ``shutdown(wait=True)`` then waits for
+    that thread for ever (seen as a SIGHUP that never ended ``pursuit run
+    --workers 2``, about 1 time in 40-150).  With no worker left and none
+    started again, closing it turns the wait into an end of file: the
+    thread marks the pool broken and exits.  A private attribute of
+    ``concurrent.futures`` (CPython 3.11-3.13); a no-op where it is absent.
+    """
+    writer = getattr(getattr(pool, "_result_queue", None), "_writer", None)
+    if writer is not None:
+        writer.close()
+
+
 class LocalProcesses:
     """Chunks across ``workers`` local processes.
 
@@ -303,6 +321,8 @@ class LocalProcesses:
             if proc.is_alive():
                 proc.kill()
                 proc.join(_TERMINATE_GRACE_S)
+        if not any(proc.is_alive() for proc in procs):
+            _close_result_writer(pool)
         pool.shutdown(wait=True, cancel_futures=True)
 
     def map_chunks(self, task, spans, on_result, **serial_kwargs) -> None:
