@@ -369,3 +369,32 @@ def test_terminate_returns_when_a_worker_was_stopped_halfway_through_sending_a_r
         end_session(proc)
     assert proc.returncode == 0, out
     assert out.startswith("terminated in"), out
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="forkserver")
+def test_a_signal_while_the_forkserver_makes_a_worker_waits_for_its_pid(monkeypatch):
+    """Ctrl-C after the forkserver was asked for a worker but before its pid was read: the signal acts when
+    the pid is known, and that worker is stopped with the others (before, no one knew its pid: it went on
+    starting, and after the parent had ended it printed a traceback of its own)."""
+    import os
+    import signal
+    from multiprocessing import forkserver
+
+    real = forkserver.read_signed
+    sent = []
+
+    def read_after_a_signal(fd):
+        if not sent:  # the first worker's pid: the request and the process are with the forkserver already
+            sent.append(True)
+            os.kill(os.getpid(), signal.SIGINT)
+        return real(fd)
+
+    monkeypatch.setattr(forkserver, "read_signed", read_after_a_signal)
+    with pytest.raises(KeyboardInterrupt):
+        with LocalProcesses(2) as backend:
+            backend.map_chunks(_worker_thread_env, [(0, 1), (1, 2)], lambda span, result: None)
+    assert sent
+    made = backend._context.made
+    assert made and all(p.pid is not None for p in made), "a worker was asked for but its pid was never read"
+    assert all(p.exitcode is not None for p in made), "a worker whose start was interrupted is still running"
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handler is put back

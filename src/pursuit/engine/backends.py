@@ -176,6 +176,41 @@ def _worker_init() -> None:
 _TERMINATE_GRACE_S = 2.0
 
 
+_HELD_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
+
+
+@contextlib.contextmanager
+def _signals_held_back():
+    """Hold SIGINT, SIGTERM and SIGHUP back while a worker starts, then act on the first one as before.
+
+    ``start`` sends the forkserver the request and the pickled process, then
+    reads the new pid.  A signal handler that raises in between (Ctrl-C, the
+    CLI's SIGTERM and SIGHUP handlers) left a child whose pid no one knew: it
+    went on starting after the parent had removed its queues' semaphores and
+    printed a ``FileNotFoundError`` traceback under ``pursuit: stopped by
+    SIGTERM`` (CI caught it once).  Here such a signal is only recorded; when
+    ``start`` has returned (the pid known, so :meth:`LocalProcesses.terminate`
+    stops that worker too), the handlers are put back and the first recorded
+    signal goes to its handler, which raises where it would have.  Python
+    handlers run in the main thread only, so elsewhere nothing is changed.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    saved = {s: signal.getsignal(s) for s in _HELD_SIGNALS}
+    held = [s for s, h in saved.items() if callable(h)]  # Python handlers; SIG_DFL/SIG_IGN and C handlers left alone
+    for s in held:
+        signal.signal(s, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        for s in held:
+            signal.signal(s, saved[s])
+    if caught:
+        saved[caught[0]](caught[0], None)
+
+
 class _IgnoresCtrlC:
     """A worker process that ignores SIGINT from the first line of its bootstrap.
 
@@ -204,7 +239,9 @@ _WORKER_CLASSES: dict[type, type] = {multiprocessing.context.SpawnProcess: _Spaw
 if hasattr(multiprocessing.context, "ForkServerProcess"):  # POSIX
 
     class _ForkServerWorker(_IgnoresCtrlC, multiprocessing.context.ForkServerProcess):
-        pass
+        def start(self) -> None:
+            with _signals_held_back():
+                super().start()
 
     _WORKER_CLASSES[multiprocessing.context.ForkServerProcess] = _ForkServerWorker
 
