@@ -229,10 +229,12 @@ def half_sent_result(seconds: float = 600.0) -> None:
     It stands for a worker stopped while it sends a large result: the pool's
     thread in the parent reads the message's length and waits for the rest.
     """
-    import gc
-    import multiprocessing.queues
     import struct
+    import sys
 
-    queue = next(o for o in gc.get_objects() if isinstance(o, multiprocessing.queues.SimpleQueue))
+    frame = sys._getframe()
+    while frame.f_code.co_name != "_process_worker":  # concurrent.futures' worker loop holds the result queue
+        frame = frame.f_back
+    queue = frame.f_locals["result_queue"]
     os.write(queue._writer.fileno(), struct.pack("!i", 1000) + b"x" * 10)  # multiprocessing's framing: length, then bytes
     time.sleep(seconds)

@@ -327,16 +327,18 @@ import sys, time
 from pursuit.engine.backends import LocalProcesses
 from tests.engine.helpers import half_sent_result
 
-def reading():  # the pool's thread is inside a result's recv, waiting for the rest of the message
+def reading():  # the pool's thread is inside a recv of the result pipe (not of its wake-up pipe)
     for frame in sys._current_frames().values():
         while frame is not None:
-            if frame.f_code.co_name == "_recv_bytes":
+            if frame.f_code.co_name == "_recv_bytes" and frame.f_locals.get("self") is results:
                 return True
             frame = frame.f_back
     return False
 
 backend = LocalProcesses(1)
-backend._executor().submit(half_sent_result)
+pool = backend._executor()
+results = pool._result_queue._reader
+pool.submit(half_sent_result)
 deadline = time.monotonic() + 60
 while not reading():
     assert time.monotonic() < deadline, "the pool's thread never started reading the result"
@@ -378,13 +380,14 @@ def test_a_signal_while_the_forkserver_makes_a_worker_waits_for_its_pid(monkeypa
     starting, and after the parent had ended it printed a traceback of its own)."""
     import os
     import signal
+    import threading
     from multiprocessing import forkserver
 
     real = forkserver.read_signed
     sent = []
 
     def read_after_a_signal(fd):
-        if not sent:  # the first worker's pid: the request and the process are with the forkserver already
+        if not sent and threading.current_thread() is threading.main_thread():  # the first worker's pid
             sent.append(True)
             os.kill(os.getpid(), signal.SIGINT)
         return real(fd)
@@ -398,3 +401,27 @@ def test_a_signal_while_the_forkserver_makes_a_worker_waits_for_its_pid(monkeypa
     assert made and all(p.pid is not None for p in made), "a worker was asked for but its pid was never read"
     assert all(p.exitcode is not None for p in made), "a worker whose start was interrupted is still running"
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handler is put back
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="forkserver")
+def test_a_signal_held_back_while_a_worker_fails_to_start_still_reaches_its_handler(monkeypatch):
+    """Ctrl-C that also ends the forkserver (the same process group) while a worker starts: the caller gets
+    the KeyboardInterrupt, with the failed start as its context, not the start's own error."""
+    import os
+    import signal
+    import threading
+    from multiprocessing import forkserver
+
+    def signal_then_fail(fd):
+        if threading.current_thread() is threading.main_thread():
+            os.kill(os.getpid(), signal.SIGINT)
+            raise EOFError("unexpected EOF")  # what reading the pid from a dead forkserver raises
+        return real(fd)
+
+    real = forkserver.read_signed
+    monkeypatch.setattr(forkserver, "read_signed", signal_then_fail)
+    with pytest.raises(KeyboardInterrupt) as caught:
+        with LocalProcesses(2) as backend:
+            backend.map_chunks(_worker_thread_env, [(0, 1), (1, 2)], lambda span, result: None)
+    assert isinstance(caught.value.__context__, EOFError)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

@@ -181,7 +181,7 @@ _HELD_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP"
 
 @contextlib.contextmanager
 def _signals_held_back():
-    """Hold SIGINT, SIGTERM and SIGHUP back while a worker starts, then act on the first one as before.
+    """Hold SIGINT, SIGTERM and SIGHUP back while a worker starts, then hand them to their handlers.
 
     ``start`` sends the forkserver the request and the pickled process, then
     reads the new pid.  A signal handler that raises in between (Ctrl-C, the
@@ -190,25 +190,44 @@ def _signals_held_back():
     printed a ``FileNotFoundError`` traceback under ``pursuit: stopped by
     SIGTERM`` (CI caught it once).  Here such a signal is only recorded; when
     ``start`` has returned (the pid known, so :meth:`LocalProcesses.terminate`
-    stops that worker too), the handlers are put back and the first recorded
-    signal goes to its handler, which raises where it would have.  Python
-    handlers run in the main thread only, so elsewhere nothing is changed.
+    stops that worker too), the handlers are put back and each recorded
+    signal goes, once, to its handler, which raises where it would have; so
+    also when ``start`` fails (the forkserver, in the same process group,
+    may have died of the same Ctrl-C), with that failure as the context.
+    Python handlers run in the main thread only, so elsewhere nothing is
+    changed.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     caught: list[int] = []
     saved = {s: signal.getsignal(s) for s in _HELD_SIGNALS}
-    held = [s for s, h in saved.items() if callable(h)]  # Python handlers; SIG_DFL/SIG_IGN and C handlers left alone
-    for s in held:
-        signal.signal(s, lambda signum, frame: caught.append(signum))
+    swapped: list[int] = []
     try:
+        for s, h in saved.items():
+            if callable(h):  # Python handlers; SIG_DFL, SIG_IGN and C handlers are left alone
+                signal.signal(s, lambda signum, frame: caught.append(signum))
+                swapped.append(s)
         yield
-    finally:
-        for s in held:
-            signal.signal(s, saved[s])
-    if caught:
-        saved[caught[0]](caught[0], None)
+    except BaseException:
+        # start failed (the forkserver, in the same process group, may have died of the same Ctrl-C): the
+        # signal still goes to its handler, which raises as it would have, the failure as its context
+        _put_back(saved, swapped)
+        _replay(saved, caught)
+        raise
+    _put_back(saved, swapped)
+    _replay(saved, caught)
+
+
+def _put_back(saved: dict[int, Any], swapped: list[int]) -> None:
+    for s in swapped:
+        signal.signal(s, saved[s])
+
+
+def _replay(saved: dict[int, Any], caught: list[int]) -> None:
+    """Hand each recorded signal, once and in order, to the handler it was held back from."""
+    for s in dict.fromkeys(caught):
+        saved[s](s, None)
 
 
 class _IgnoresCtrlC:
