@@ -191,6 +191,7 @@ def test_a_signal_ends_a_run_with_workers_cleanly(tmp_path, sig, group, code, li
     """One line, exit 128 + signal, no traceback, no worker / forkserver / resource tracker left, no temp folder."""
     import os
     import signal
+    import time
 
     from .engine.helpers import end_session, session_pids, wait_until
 
@@ -198,17 +199,28 @@ def test_a_signal_ends_a_run_with_workers_cleanly(tmp_path, sig, group, code, li
     config.write_text(LONG)
     out = tmp_path / "out"
     err = tmp_path / "stderr.txt"
+    # If the command hangs, SIGUSR1 makes it print every thread's stack into the failure message.
+    diag = tmp_path / "diag"
+    diag.mkdir()
+    (diag / "sitecustomize.py").write_text("import faulthandler, signal\nfaulthandler.register(signal.SIGUSR1, all_threads=True)\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(diag), os.environ.get("PYTHONPATH")])))
     with err.open("wb") as fh:  # a file, not a pipe: a leftover process holding it must not hang the test
         proc = subprocess.Popen(
             [sys.executable, "-m", "pursuit", "run", str(config), "--out", str(out / "exp"), "--runs", "200000",
              "--chunk-size", "500", "--workers", "2", "--no-progress"],
-            stdout=subprocess.DEVNULL, stderr=fh, start_new_session=True,
+            stdout=subprocess.DEVNULL, stderr=fh, start_new_session=True, env=env,
         )
     try:
         # main, resource tracker, forkserver and 2 workers
         assert wait_until(lambda: len(session_pids(proc.pid)) >= 5, 120), err.read_text()
         (os.killpg if group else os.kill)(proc.pid, getattr(signal, sig))
-        assert proc.wait(30) == code, err.read_text()
+        try:
+            returned = proc.wait(30)
+        except subprocess.TimeoutExpired:
+            os.kill(proc.pid, signal.SIGUSR1)
+            time.sleep(2)
+            pytest.fail(f"pursuit did not end within 30 s of {sig}; its threads:\n{err.read_text()}")
+        assert returned == code, err.read_text()
         assert wait_until(lambda: not session_pids(proc.pid), 20), f"still alive: {session_pids(proc.pid)}"
     finally:
         end_session(proc)

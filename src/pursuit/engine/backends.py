@@ -295,16 +295,17 @@ class _RecordingContext:
 
 
 def _close_result_writer(pool: ProcessPoolExecutor) -> None:
-    """Close this process's write end of the pool's result pipe, once every worker is gone.
+    """Close this process's write end of the pool's result pipe, after the workers were stopped.
 
     A worker stopped while it was sending a result (a chunk's arrays are
     megabytes, written in pieces) leaves the pool's own thread reading the
     rest of that message for ever: this process holds the pipe's write end
     too, so no end of file comes, and ``shutdown(wait=True)`` then waits for
     that thread for ever (seen as a SIGHUP that never ended ``pursuit run
-    --workers 2``, about 1 time in 40-150).  With no worker left and none
-    started again, closing it turns the wait into an end of file: the
-    thread marks the pool broken and exits.  A private attribute of
+    --workers 2``, about 1 time in 40-150).  The parent never writes to it,
+    and no worker is started again, so closing it turns the wait into an end
+    of file once the workers' copies are closed (they exit): the thread
+    marks the pool broken and exits.  A private attribute of
     ``concurrent.futures`` (CPython 3.11-3.13); a no-op where it is absent.
     """
     writer = getattr(getattr(pool, "_result_queue", None), "_writer", None)
@@ -377,8 +378,9 @@ class LocalProcesses:
             if proc.is_alive():
                 proc.kill()
                 proc.join(_TERMINATE_GRACE_S)
-        if not any(proc.is_alive() for proc in procs):
-            _close_result_writer(pool)
+        # Unconditionally: a worker the forkserver has not yet reported dead still reads as alive here, and
+        # any worker that is alive keeps its own copy of the write end (the parent never writes to it).
+        _close_result_writer(pool)
         pool.shutdown(wait=True, cancel_futures=True)
 
     def map_chunks(self, task, spans, on_result, **serial_kwargs) -> None:
