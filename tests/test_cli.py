@@ -195,6 +195,9 @@ def test_a_signal_ends_a_run_with_workers_cleanly(tmp_path, sig, group, code, li
 
     from .engine.helpers import end_session, session_pids, wait_until
 
+    if signal.getsignal(getattr(signal, sig)) is signal.SIG_IGN:
+        # Under nohup the command inherits SIGHUP ignored and rightly keeps ignoring it (docs/cli.md).
+        pytest.skip(f"{sig} is ignored in this process (nohup?), so the command ignores it too")
     config = tmp_path / "exp.toml"
     config.write_text(LONG)
     out = tmp_path / "out"
