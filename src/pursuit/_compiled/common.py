@@ -173,10 +173,85 @@ def log_positive(x):
     return dk * _LN2_HI - ((hfsq - (s * (hfsq + r) + dk * _LN2_LO)) - f)
 
 
+# atan2 and hypot, as exp and log above: no libm call, so that loops over lanes vectorise (the
+# compiled UKF/CKF's range-bearing sigma points); a lane outside the ranges below says so and the
+# caller takes libm's value there instead
+# minimax coefficients of (atan(t) − t) / t in t² on |t| ≤ 7/16 and the breakpoints' atan split in two
+# (Sun's fdlibm s_atan.c)
+_AT0, _AT1, _AT2, _AT3, _AT4, _AT5 = (3.33333333333329318027e-01, -1.99999999998764832476e-01, 1.42857142725034663711e-01,
+                                      -1.11111104054623557880e-01, 9.09088713343650656196e-02, -7.69187620504482999495e-02)
+_AT6, _AT7, _AT8, _AT9, _AT10 = (6.66107313738753120669e-02, -5.83357013379057348645e-02, 4.97687799461593236017e-02,
+                                 -3.65315727442169155270e-02, 1.62858201153657823623e-02)
+_ATAN_HALF = (4.63647609000806093515e-01, 2.26987774529616870924e-17)  # atan(1/2), hi and lo
+_ATAN_ONE = (7.85398163397448278999e-01, 3.06161699786838301793e-17)
+_ATAN_3_2 = (9.82793723247329054082e-01, 1.39033110312309984516e-17)
+_ATAN_INF = (1.57079632679489655800e+00, 6.12323399573676603587e-17)
+_PI_LO = 1.2246467991473531772e-16  # π − fl(π)
+_LANE_MIN = 2.0 ** -500  # atan2_lanes / hypot_lanes: arguments inside these bounds neither overflow nor lose bits
+_LANE_MAX = 2.0 ** 500
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def atan2_lanes(y, x):
+    """``(atan2(y, x), exact)``: within 1 ulp of libm's atan2 where ``exact`` (tested), else libm's value is needed.
+
+    Branch-free, so a loop over lanes vectorises.  ``exact`` is False for
+    a zero, subnormal, huge (beyond 2^±500), infinite or NaN argument (y = ±0
+    excepted): the caller recomputes those lanes with ``math.atan2``.
+    With q = |y| / |x| reduced to |t| ≤ 7/16 around 0, 1/2, 1, 3/2 or ∞
+    (t = q, (2q − 1)/(2 + q), (q − 1)/(q + 1), (q − 1.5)/(1 + 1.5q), −1/q),
+    atan q = atan(c) + atan t by fdlibm's polynomial; the quadrant from the
+    signs of x and y (their sign bits, so atan2(−0, x) = −0 as in libm).
+    """
+    ax = abs(x)
+    ay = abs(y)
+    exact = (ax >= _LANE_MIN) & (ax <= _LANE_MAX) & (((ay >= _LANE_MIN) & (ay <= _LANE_MAX)) | (ay == 0.0))
+    q = ay / ax
+    near_inf = q >= 2.4375
+    near_3_2 = q >= 1.1875
+    near_one = q >= 0.6875
+    near_half = q >= 0.4375
+    num = -1.0 if near_inf else (q - 1.5 if near_3_2 else (q - 1.0 if near_one else (fma(2.0, q, -1.0) if near_half else q)))
+    den = q if near_inf else (fma(1.5, q, 1.0) if near_3_2 else (q + 1.0 if near_one else (2.0 + q if near_half else 1.0)))
+    hi = _ATAN_INF[0] if near_inf else (_ATAN_3_2[0] if near_3_2 else (_ATAN_ONE[0] if near_one else (_ATAN_HALF[0] if near_half else 0.0)))
+    lo = _ATAN_INF[1] if near_inf else (_ATAN_3_2[1] if near_3_2 else (_ATAN_ONE[1] if near_one else (_ATAN_HALF[1] if near_half else 0.0)))
+    t = num / den
+    z = t * t
+    w = z * z
+    s1 = z * fma(w, fma(w, fma(w, fma(w, fma(w, _AT10, _AT8), _AT6), _AT4), _AT2), _AT0)
+    s2 = w * fma(w, fma(w, fma(w, fma(w, _AT9, _AT7), _AT5), _AT3), _AT1)
+    a = hi - (fma(t, s1 + s2, -lo) - t)
+    v = math.pi - (a - _PI_LO) if math.copysign(1.0, x) < 0.0 else a
+    return math.copysign(v, y), exact
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def hypot_lanes(x, y):
+    """``(√(x² + y²), exact)``: within 1 ulp of libm's hypot where ``exact`` (tested), else libm's value is needed.
+
+    Branch-free (one ``fma`` and a square root); ``exact`` is False where
+    x² + y² is zero, below 2^−1000, above 2^1000, infinite or NaN.
+    """
+    s = fma(x, x, y * y)
+    return math.sqrt(s), (s >= _LANE_MIN * _LANE_MIN) & (s <= _LANE_MAX * _LANE_MAX)
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def wrap(a):
     """Angle wrapped to [-π, π), as :func:`pursuit.models.measurement.wrap_angle`."""
     return (a + math.pi) % TWO_PI - math.pi
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def wrap_inside(a):
+    """``(wrap(a), inside)`` where ``a + π`` is already in [0, 2π) (``inside``), the same bits as :func:`wrap` there.
+
+    No remainder is taken (``%`` is a libm ``fmod`` call, one per value),
+    so a loop over lanes vectorises; where ``inside`` is False the value is
+    not the wrapped angle and the caller wraps that value with :func:`wrap`.
+    """
+    t = a + math.pi
+    return t - math.pi, (t >= 0.0) & (t < TWO_PI)
 
 
 @njit(cache=True, error_model="numpy")

@@ -37,9 +37,10 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .common import LOG_2PI, serial_and_parallel, wrap
+from .common import LOG_2PI, serial_and_parallel, wrap, wrap_inside
 from .kernel_args import GaussOutputs
-from .model_math import h_row, jac_row, wraps
+from .model_math import h_row, h_sigma_row, jac_row, range_bearing_lanes, wraps
+from .specs import M_RANGE_BEARING
 
 BLOCK = 512
 SEQUENCE_BLOCK = 256
@@ -236,6 +237,32 @@ def _h_block(sensor, X, out):
     XT, oT = X.T, out.T
     for c in range(X.shape[1]):
         h_row(sensor, XT, c, oT, c)
+
+
+@njit(**_NJ)
+def _h_sigma_block(sensor, X, out):
+    """out (m, B) = h of the sigma points X (n, B): :func:`.model_math.h_sigma_row` run by run, the same bits.
+
+    RangeBearing in one loop over the runs without libm calls (it
+    vectorises), then libm's values for any run :func:`.model_math.range_bearing_lanes`
+    could not take (none in practice).
+    """
+    if sensor.kind != M_RANGE_BEARING:
+        _h_block(sensor, X, out)
+        return
+    px, py = X[sensor.idx[0]], X[sensor.idx[1]]
+    sx, sy = sensor.A[0, 0], sensor.A[0, 1]
+    ranges, bearings = out[0], out[1]
+    inexact = 0
+    for c in range(X.shape[1]):
+        r, b, exact = range_bearing_lanes(px[c] - sx, py[c] - sy)
+        ranges[c] = r
+        bearings[c] = b
+        inexact += 0 if exact else 1
+    if inexact:
+        XT, oT = X.T, out.T
+        for c in range(X.shape[1]):
+            h_sigma_row(sensor, XT, c, oT, c)
 
 
 @njit(**_NJ)
@@ -626,6 +653,72 @@ def _sigma_predict_ws(xb, Pb, prediction, sigma, okb, pred, with_cross, ws):
 
 
 @njit(**_NJ)
+def _mean_angles(Z, wm, kind, angle, zp):
+    """zp (m, B) = Σ wm[s] · (Z[s] − Z[0]), the differences of an angle component wrapped (the sum before Z[0] is added)."""
+    npts, m, B = Z.shape
+    zp[:] = 0.0
+    for s in range(npts):
+        w = wm[s]
+        for a in range(m):
+            for c in range(B):
+                dz = Z[s, a, c] - Z[0, a, c]
+                if wraps(kind, angle, a):
+                    dz = wrap(dz)
+                zp[a, c] += w * dz
+
+
+@njit(**_NJ)
+def _mean_angles_inside(Z, wm, kind, angle, zp):
+    """:func:`_mean_angles` through :func:`.common.wrap_inside`; True where some difference was outside [−π, π) (zp unusable)."""
+    npts, m, B = Z.shape
+    zp[:] = 0.0
+    outside = 0
+    for s in range(npts):
+        w = wm[s]
+        for a in range(m):
+            if wraps(kind, angle, a):
+                for c in range(B):
+                    dz, inside = wrap_inside(Z[s, a, c] - Z[0, a, c])
+                    zp[a, c] += w * dz
+                    outside += 0 if inside else 1
+            else:
+                for c in range(B):
+                    zp[a, c] += w * (Z[s, a, c] - Z[0, a, c])
+    return outside > 0
+
+
+@njit(**_NJ)
+def _residuals(Z, zp, kind, angle, dZ):
+    """dZ (npts, m, B) = Z − zp, an angle component wrapped."""
+    npts, m, B = Z.shape
+    for s in range(npts):
+        for a in range(m):
+            for c in range(B):
+                dz = Z[s, a, c] - zp[a, c]
+                if wraps(kind, angle, a):
+                    dz = wrap(dz)
+                dZ[s, a, c] = dz
+
+
+@njit(**_NJ)
+def _residuals_inside(Z, zp, kind, angle, dZ):
+    """:func:`_residuals` through :func:`.common.wrap_inside`; True where some residual was outside [−π, π) (dZ unusable)."""
+    npts, m, B = Z.shape
+    outside = 0
+    for s in range(npts):
+        for a in range(m):
+            if wraps(kind, angle, a):
+                for c in range(B):
+                    dz, inside = wrap_inside(Z[s, a, c] - zp[a, c])
+                    dZ[s, a, c] = dz
+                    outside += 0 if inside else 1
+            else:
+                for c in range(B):
+                    dZ[s, a, c] = Z[s, a, c] - zp[a, c]
+    return outside > 0
+
+
+@njit(**_NJ)
 def _sigma_correct(xp, Pp, zb, vb, sensor, sigma, blk):
     """The UKF/CKF's measurement update of one block: points redrawn from the prediction ``(xp, Pp)``, then :func:`_update` into ``blk``."""
     n, B = xp.shape
@@ -646,26 +739,16 @@ def _sigma_correct_ws(xp, Pp, zb, vb, sensor, sigma, blk, ws):
     _chol_ws(Pp, L, okb, d)
     _points(xp, L, cscale, centre, chi)
     for s in range(npts):
-        _h_block(sensor, chi[s], Z[s])
-    zp[:] = 0.0
-    for s in range(npts):
-        w = wm[s]
-        for a in range(m):
-            for c in range(B):
-                dz = Z[s, a, c] - Z[0, a, c]
-                if wraps(kind, angle, a):
-                    dz = wrap(dz)
-                zp[a, c] += w * dz
+        _h_sigma_block(sensor, chi[s], Z[s])
+    # an angle's differences are wrapped without the remainder where they are already in [−π, π) (the
+    # loops vectorise); if any is not, the loop is done again with wrap(), the same bits everywhere
+    if _mean_angles_inside(Z, wm, kind, angle, zp):
+        _mean_angles(Z, wm, kind, angle, zp)
     for a in range(m):
         for c in range(B):
             zp[a, c] += Z[0, a, c]
-    for s in range(npts):
-        for a in range(m):
-            for c in range(B):
-                dz = Z[s, a, c] - zp[a, c]
-                if wraps(kind, angle, a):
-                    dz = wrap(dz)
-                dZ[s, a, c] = dz
+    if _residuals_inside(Z, zp, kind, angle, dZ):
+        _residuals(Z, zp, kind, angle, dZ)
     Pzz[:] = 0.0
     Pxz[:] = 0.0
     for s in range(npts):

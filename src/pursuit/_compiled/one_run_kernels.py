@@ -25,7 +25,7 @@ import numpy as np
 from numba import njit
 
 from .common import LOG_2PI, wrap
-from .model_math import h_row, jac_row, wraps
+from .model_math import h_row, h_sigma_row, jac_row, wraps
 
 __all__ = ["ekf_one_scalar", "sigma_one_scalar"]
 
@@ -361,7 +361,7 @@ def sigma_one_scalar(x, P, z, prediction, sensor, sigma, out):
     ok &= _chol(Pp, L)
     _points(xp, L, cscale, centre, chi)
     for s in range(npts):
-        h_row(sensor, chi, s, Z, s)
+        h_sigma_row(sensor, chi, s, Z, s)
     for a in range(m):
         o = 0.0
         for s in range(npts):
