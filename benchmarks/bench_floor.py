@@ -209,8 +209,11 @@ def ukf_split(runs: int, steps: int) -> dict[str, float]:
     """Where the compiled UKF's time goes on bench_kf's work (4-state CV, range-bearing sensor), one thread.
 
     Returns ns per filter-step (one run, one step) of: the range-bearing
-    measurement of the 9 sigma points alone (libm's ``hypot`` and ``atan2``,
-    one run at a time, as ``model_math.h_range_bearing``); the sigma step
+    measurement of the 9 sigma points alone, through libm's ``hypot`` and
+    ``atan2`` one run at a time (as ``model_math.h_range_bearing``, which the
+    EKF and the particle filters use) and as the UKF/CKF kernels compute it
+    (``gauss_kernels._h_sigma_block``: ``atan2_lanes`` and ``hypot_lanes``
+    in one vectorised loop over the runs); the sigma step
     kernel alone (lane-major arrays, no Python between steps); the
     whole-sequence kernel alone (every step of every run in one call, the
     outputs already allocated); ``pursuit.run`` stepping from Python
@@ -225,7 +228,15 @@ def ukf_split(runs: int, steps: int) -> dict[str, float]:
     from pursuit._compiled.kernel_args import GaussSequenceOutputs, Prediction, SigmaPoints
 
     @numba.njit(error_model="numpy")
-    def h_points(X, out):  # 9 points (n, B) per run: range and bearing, as the kernel's h
+    def h_points_lanes(sensor, X, out):  # the same, as the UKF/CKF kernels do it
+        acc = 0.0
+        for s in range(X.shape[0]):
+            GK._h_sigma_block(sensor, X[s], out)
+            acc += out[0, 0]
+        return acc
+
+    @numba.njit(error_model="numpy")
+    def h_points(X, out):  # 9 points (n, B) per run: range and bearing, libm, as model_math.h_range_bearing
         acc = 0.0
         for s in range(X.shape[0]):
             for c in range(X.shape[2]):
@@ -270,8 +281,10 @@ def ukf_split(runs: int, steps: int) -> dict[str, float]:
     hout = np.empty((m, runs))
     h_points(pts, hout)
     h = _median_time(lambda: h_points(pts, hout), 5) / runs
+    h_points_lanes(sensor, pts, hout)
+    h_lanes = _median_time(lambda: h_points_lanes(sensor, pts, hout), 5) / runs
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
-    return {"h": h * 1e9, "kernel": kernel * 1e9, "sequence": sequence * 1e9, "stepped": stepped * 1e9, "run": whole * 1e9}
+    return {"h": h * 1e9, "h_lanes": h_lanes * 1e9, "kernel": kernel * 1e9, "sequence": sequence * 1e9, "stepped": stepped * 1e9, "run": whole * 1e9}
 
 
 def print_ukf_split(quick: bool = False) -> dict[str, float]:
@@ -281,7 +294,8 @@ def print_ukf_split(quick: bool = False) -> dict[str, float]:
     print(f"**Compiled UKF, 4-state CV, range-bearing sensor (bench_kf's work), {runs} runs x {steps} steps, one thread**\n")
     print("| measured | ns per filter-step | M filter-steps/s |")
     print("|---|---|---|")
-    print(f"| range and bearing of the 9 sigma points alone (libm hypot, atan2) | {t['h']:.0f} | {1e3 / t['h']:.2f} |")
+    print(f"| range and bearing of the 9 sigma points alone, libm hypot and atan2 (the EKF's and PFs' h) | {t['h']:.0f} | {1e3 / t['h']:.2f} |")
+    print(f"| the same as the UKF/CKF kernels compute it (`atan2_lanes`, `hypot_lanes`, one vectorised loop) | {t['h_lanes']:.0f} | {1e3 / t['h_lanes']:.2f} |")
     print(f"| sigma step kernel alone (lane-major arrays, no Python between steps) | {t['kernel']:.0f} | {1e3 / t['kernel']:.2f} |")
     print(f"| whole-sequence kernel alone (`gauss_kernels.sigma_sequence_serial`, outputs allocated) | {t['sequence']:.0f} | {1e3 / t['sequence']:.2f} |")
     print(f"| `pursuit.run(..., sequence=False)` (step kernel, per-step glue, step info, divergence checks) | {t['stepped']:.0f} | {1e3 / t['stepped']:.2f} |")

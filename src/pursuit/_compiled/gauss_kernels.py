@@ -523,6 +523,7 @@ def _ekf_sequence(prior, obs, prediction, sensor, keep_cov, out):
         db = np.empty(B, dtype=np.int64)
         okb = np.ones(B, dtype=np.bool_)
         L = np.empty((n, n, B))
+        d = np.empty(B)
         HL = np.empty((m, n, B))
         D0 = np.zeros((m, m, B))
         ws = _update_workspace(n, m, B)
@@ -543,17 +544,15 @@ def _ekf_sequence(prior, obs, prediction, sensor, keep_cov, out):
             _jac_block(sensor, xp, H)
             _bmmT(Pp, H, PHt)
             _bmm(H, PHt, Pzz)
-            _chol(Pp, L, okb)
+            _chol_ws(Pp, L, okb, d)
             _bmm(H, L, HL)
             _update_ws((xp, Pp, zp, Pzz, PHt, L, HL, D0), (zb, vb), sensor, (xo, Po, inb, Sb, nb, db, lb, okb), ws)
             for c in range(B):
                 r = r0 + c
                 for i in range(n):
                     means[k, r, i] = xo[i, c]
-                    xb[i, c] = xo[i, c]
-                    for j in range(n):
-                        Pb[i, j, c] = Po[i, j, c]
-                        if keep_cov:
+                    if keep_cov:
+                        for j in range(n):
                             covs[k, r, i, j] = Po[i, j, c]
                 for a in range(m):
                     innov[k, r, a] = inb[a, c]
@@ -562,6 +561,8 @@ def _ekf_sequence(prior, obs, prediction, sensor, keep_cov, out):
                 nis[k, r] = nb[c]
                 dof[k, r] = db[c]
                 loglik[k, r] = lb[c]
+            xb, xo = xo, xb  # the posterior is the next step's prior: the buffers trade places, nothing is copied
+            Pb, Po = Po, Pb
         for c in range(B):
             ok[r0 + c] = okb[c]
 
@@ -870,10 +871,8 @@ def _sigma_sequence(prior, obs, prediction, sensor, sigma, keep_cov, out):
                 r = r0 + c
                 for i in range(n):
                     means[k, r, i] = xo[i, c]
-                    xb[i, c] = xo[i, c]
-                    for j in range(n):
-                        Pb[i, j, c] = Po[i, j, c]
-                        if keep_cov:
+                    if keep_cov:
+                        for j in range(n):
                             covs[k, r, i, j] = Po[i, j, c]
                 for a in range(m):
                     innov[k, r, a] = inb[a, c]
@@ -882,6 +881,8 @@ def _sigma_sequence(prior, obs, prediction, sensor, sigma, keep_cov, out):
                 nis[k, r] = nb[c]
                 dof[k, r] = db[c]
                 loglik[k, r] = lb[c]
+            xb, xo = xo, xb  # the posterior is the next step's prior: the buffers trade places, nothing is copied
+            Pb, Po = Po, Pb
         for c in range(B):
             ok[r0 + c] = okb[c]
 
