@@ -28,6 +28,17 @@ scratch arrays allocated once.  The UKF/CKF step and sequence kernels share
 their block functions (:func:`_sigma_predict_ws`, :func:`_sigma_correct_ws`),
 so the two give the same bits whatever their block sizes: no loop reduces
 across runs.
+
+The UKF/CKF's sigma points are measured without libm calls in the loop over
+the runs (:func:`_h_sigma_block`: RangeBearing's range and bearing by
+``common.hypot_lanes`` / ``common.atan2_lanes``, within 1 ulp of libm's),
+and an angle's differences are wrapped without the remainder where they are
+already in [−π, π) (``common.wrap_inside``), so those loops vectorise; a
+lane the fast forms do not take sends its loop to the libm / ``wrap`` form
+(the same bits as that form everywhere).  The one-run kernels
+(:mod:`.one_run_kernels`) measure their points through the same
+``model_math.h_sigma_row``, so every compiled UKF/CKF path gives the same
+bits.
 """
 
 from __future__ import annotations
