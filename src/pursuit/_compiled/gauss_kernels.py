@@ -34,8 +34,9 @@ the runs (:func:`_h_sigma_block`: RangeBearing's range and bearing by
 ``common.hypot_lanes`` / ``common.atan2_lanes``, within 1 ulp of libm's),
 and an angle's differences are wrapped without the remainder where they are
 already in [−π, π) (``common.wrap_inside``), so those loops vectorise; a
-lane the fast forms do not take sends its loop to the libm / ``wrap`` form
-(the same bits as that form everywhere).  The one-run kernels
+point the fast forms do not take gets the libm / ``wrap`` value in a second
+loop, taken only when there is such a point (the same bits as those forms
+wherever the fast ones apply).  The one-run kernels
 (:mod:`.one_run_kernels`) measure their points through the same
 ``model_math.h_sigma_row``, so every compiled UKF/CKF path gives the same
 bits.
@@ -255,8 +256,9 @@ def _h_sigma_block(sensor, X, out):
     """out (m, B) = h of the sigma points X (n, B): :func:`.model_math.h_sigma_row` run by run, the same bits.
 
     RangeBearing in one loop over the runs without libm calls (it
-    vectorises), then libm's values for any run :func:`.model_math.range_bearing_lanes`
-    could not take (none in practice).
+    vectorises), then, only if there are any, libm's values for the runs
+    :func:`.model_math.range_bearing_lanes` does not take (an offset with
+    dx = 0 exactly, one beyond its range, NaN: one libm call per such run).
     """
     if sensor.kind != M_RANGE_BEARING:
         _h_block(sensor, X, out)
@@ -273,7 +275,8 @@ def _h_sigma_block(sensor, X, out):
     if inexact:
         XT, oT = X.T, out.T
         for c in range(X.shape[1]):
-            h_sigma_row(sensor, XT, c, oT, c)
+            if not range_bearing_lanes(px[c] - sx, py[c] - sy)[2]:
+                h_sigma_row(sensor, XT, c, oT, c)
 
 
 @njit(**_NJ)
@@ -666,7 +669,10 @@ def _sigma_predict_ws(xb, Pb, prediction, sigma, okb, pred, with_cross, ws):
 
 @njit(**_NJ)
 def _mean_angles(Z, wm, kind, angle, zp):
-    """zp (m, B) = Σ wm[s] · (Z[s] − Z[0]), the differences of an angle component wrapped (the sum before Z[0] is added)."""
+    """zp (m, B) = Σ wm[s] · (Z[s] − Z[0]), the differences of an angle component wrapped (the sum before Z[0] is added).
+
+    The remainder is taken only for a difference that needs it (:func:`.common.wrap_inside`).
+    """
     npts, m, B = Z.shape
     zp[:] = 0.0
     for s in range(npts):
@@ -675,7 +681,8 @@ def _mean_angles(Z, wm, kind, angle, zp):
             for c in range(B):
                 dz = Z[s, a, c] - Z[0, a, c]
                 if wraps(kind, angle, a):
-                    dz = wrap(dz)
+                    fast, inside = wrap_inside(dz)
+                    dz = fast if inside else wrap(dz)
                 zp[a, c] += w * dz
 
 
@@ -701,14 +708,15 @@ def _mean_angles_inside(Z, wm, kind, angle, zp):
 
 @njit(**_NJ)
 def _residuals(Z, zp, kind, angle, dZ):
-    """dZ (npts, m, B) = Z − zp, an angle component wrapped."""
+    """dZ (npts, m, B) = Z − zp, an angle component wrapped (the remainder only where needed, as :func:`_mean_angles`)."""
     npts, m, B = Z.shape
     for s in range(npts):
         for a in range(m):
             for c in range(B):
                 dz = Z[s, a, c] - zp[a, c]
                 if wraps(kind, angle, a):
-                    dz = wrap(dz)
+                    fast, inside = wrap_inside(dz)
+                    dz = fast if inside else wrap(dz)
                 dZ[s, a, c] = dz
 
 

@@ -262,7 +262,9 @@ def range_bearing_lanes(dx, dy):
     """``(range, bearing, exact)`` of the offset ``(dx, dy)`` without libm calls, so a loop over lanes vectorises.
 
     Within 1 ulp of ``math.hypot`` / ``math.atan2`` where ``exact``; where
-    not (a zero, huge or non-finite offset) the caller takes libm's values.
+    not the caller takes libm's values: dx = 0 exactly (a point due north or
+    south), |dx| or a non-zero |dy| outside [2^−500, 2^500], dx² + dy²
+    outside [2^−1000, 2^1000], an infinite or NaN offset.
     """
     r, r_exact = hypot_lanes(dx, dy)
     b, b_exact = atan2_lanes(dy, dx)
