@@ -761,7 +761,7 @@ def _sigma_correct_ws(xp, Pp, zb, vb, sensor, sigma, blk, ws):
     for s in range(npts):
         _h_sigma_block(sensor, chi[s], Z[s])
     # an angle's differences are wrapped without the remainder where they are already in [−π, π) (the
-    # loops vectorise); if any is not, the loop is done again with wrap(), the same bits everywhere
+    # loops vectorise); if any is not, the loop is done again taking the remainder where it is needed
     if _mean_angles_inside(Z, wm, kind, angle, zp):
         _mean_angles(Z, wm, kind, angle, zp)
     for a in range(m):
