@@ -51,7 +51,7 @@ from numba import njit, prange
 
 from .common import LOG_2PI, serial_and_parallel, wrap, wrap_inside
 from .kernel_args import GaussOutputs
-from .model_math import h_row, h_sigma_row, jac_row, range_bearing_lanes, wraps
+from .model_math import h_row, jac_row, range_bearing_lanes, wraps
 from .specs import M_RANGE_BEARING
 
 BLOCK = 512
@@ -276,7 +276,7 @@ def _h_sigma_block(sensor, X, out):
         XT, oT = X.T, out.T
         for c in range(X.shape[1]):
             if not range_bearing_lanes(px[c] - sx, py[c] - sy)[2]:
-                h_sigma_row(sensor, XT, c, oT, c)
+                h_row(sensor, XT, c, oT, c)  # libm's values for this run (what h_sigma_row gives it)
 
 
 @njit(**_NJ)

@@ -282,16 +282,12 @@ def h_sigma_row(sensor, X, i, out, o):
     """
     if sensor.kind == M_RANGE_BEARING:
         A, idx = sensor.A, sensor.idx
-        dx = X[i, idx[0]] - A[0, 0]
-        dy = X[i, idx[1]] - A[0, 1]
-        r, b, exact = range_bearing_lanes(dx, dy)
-        if not exact:
-            r = math.hypot(dx, dy)
-            b = math.atan2(dy, dx)
-        out[o, 0] = r
-        out[o, 1] = b
-    else:
-        h_row(sensor, X, i, out, o)
+        r, b, exact = range_bearing_lanes(X[i, idx[0]] - A[0, 0], X[i, idx[1]] - A[0, 1])
+        if exact:
+            out[o, 0] = r
+            out[o, 1] = b
+            return
+    h_row(sensor, X, i, out, o)  # other sensors, and a point the lanes' functions do not take (libm's values)
 
 
 @njit(**_NJ)
