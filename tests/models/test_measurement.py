@@ -77,6 +77,26 @@ def test_loglik_skips_missing_components_with_diagonal_noise():
         gaussian_loglik(res, np.array([[1, 0.1, 0], [0.1, 4, 0], [0, 0, 2.0]]))
 
 
+def test_diagonal_loglik_batch_with_missing_components_in_some_rows(rng):
+    """A batch where only some rows miss a component: those rows drop its term, the others are unchanged."""
+    R = np.diag([1.0, 4.0, 2.0])
+    res = rng.standard_normal((4, 50, 3))
+    full = gaussian_loglik(res, R)
+    scale = np.sqrt(np.diag(R))
+    np.testing.assert_allclose(full, stats.norm(0, scale).logpdf(res).sum(axis=-1), rtol=1e-12)
+    holed = res.copy()
+    holed[1, 7, 1] = np.nan
+    holed[3, :, 0] = np.nan
+    got = gaussian_loglik(holed, R)
+    want = np.where(np.isnan(holed), 0.0, stats.norm(0, scale).logpdf(np.nan_to_num(holed))).sum(axis=-1)
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+    untouched = np.ones(full.shape, dtype=bool)
+    untouched[1, 7] = untouched[3] = False
+    assert np.array_equal(got[untouched], full[untouched])  # the same bits where nothing is missing
+    assert np.all(np.isfinite(got))
+    assert gaussian_loglik(np.array([1, 2, 0]), R) == gaussian_loglik(np.array([1.0, 2.0, 0.0]), R)  # integer residuals
+
+
 def test_samples_have_the_model_noise(rng):
     m = RangeSensors(ANCHORS, [0.5, 1.0, 2.0])
     x = np.tile([10.0, 0.0, 20.0, 0.0], (100_000, 1))

@@ -50,12 +50,22 @@ def gaussian_loglik(residual: np.ndarray, R: np.ndarray) -> np.ndarray:
     Missing (NaN) components are marginalised out exactly when R is
     diagonal.  With a full R, a residual containing NaN raises ``ValueError``.
     """
+    residual = np.asarray(residual, dtype=float)  # no copy for float64 input
     diag = np.diag(R)
     if np.count_nonzero(R - np.diag(diag)) == 0:
-        valid = ~np.isnan(residual)
-        r = np.where(valid, residual, 0.0)
-        terms = r * r / diag + np.where(valid, np.log(diag) + _LOG_2PI, 0.0)
-        return -0.5 * terms.sum(axis=-1)
+        norm = np.log(diag) + _LOG_2PI
+        # r²/σ² + log(2π σ²) per component, in place (the particle filters call this on (runs, N, m)
+        # arrays every step); a sum is NaN only where a component is missing (NaN; each term is
+        # finite, +inf or NaN), and only then are the missing components' terms taken out
+        terms = np.multiply(residual, residual)
+        terms /= diag
+        terms += norm
+        total = terms.sum(axis=-1)
+        if np.isnan(total).any():
+            valid = ~np.isnan(residual)
+            r = np.where(valid, residual, 0.0)
+            total = np.where(valid, r * r / diag + norm, 0.0).sum(axis=-1)
+        return -0.5 * total
     if np.isnan(residual).any():
         raise ValueError("missing measurement components need a diagonal measurement covariance")
     L = np.linalg.cholesky(R)
