@@ -106,6 +106,26 @@ def test_source_rejects_empty_dimensions():
         kf_codegen.linear_kf_source(0, 1, ("", "", "", "1"))
 
 
+def test_a_change_to_the_inlined_helpers_gives_a_new_module(tmp_path, monkeypatch):
+    """numba caches a generated kernel by its own file: the helpers it inlines must be part of the file's name."""
+    import hashlib
+    from pathlib import Path
+
+    common = Path(kf_codegen.__file__).parent / "common.py"
+    assert kf_codegen.depends_digest() == hashlib.sha256(common.read_bytes()).hexdigest()[:16]
+    monkeypatch.setenv(generated.ENV_VAR, str(tmp_path))
+    pats = ("1111", "0001", "10", "1")
+    source = kf_codegen.linear_kf_source(2, 1, pats)
+    assert kf_codegen.depends_digest() in source
+    before = generated.load_module("linear_kf_n2_m1", source)
+    monkeypatch.setattr(kf_codegen, "depends_digest", lambda: "0123456789abcdef")  # common.py edited
+    changed = kf_codegen.linear_kf_source(2, 1, pats)
+    assert changed != source
+    after = generated.load_module("linear_kf_n2_m1", changed)
+    assert after.__name__ != before.__name__
+    assert len(list(tmp_path.glob("linear_kf_n2_m1_*.py"))) == 2
+
+
 def test_kernel_dir_follows_the_environment(tmp_path, monkeypatch):
     monkeypatch.setenv(generated.ENV_VAR, str(tmp_path / "k"))
     assert generated.kernel_dir() == tmp_path / "k"

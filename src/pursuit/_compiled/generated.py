@@ -8,8 +8,10 @@ machine code instead of compiling it (a few seconds per structure).
 The directory is ``$PURSUIT_KERNEL_DIR`` if set, else
 ``$XDG_CACHE_HOME/pursuit/kernels`` (``~/.cache/pursuit/kernels``), else a
 per-user folder under the system's temporary directory when the home
-cache cannot be written.  File names carry a hash of the source, so a
-pursuit upgrade that changes the generator never loads a stale module.
+cache cannot be written.  File names carry a hash of the source, which
+names the compiled helpers it inlines by a hash of theirs
+(:func:`.kf_codegen.depends_digest`), so a pursuit upgrade that changes the
+generator or those helpers never loads a stale module or stale machine code.
 """
 
 from __future__ import annotations
