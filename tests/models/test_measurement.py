@@ -77,23 +77,37 @@ def test_loglik_skips_missing_components_with_diagonal_noise():
         gaussian_loglik(res, np.array([[1, 0.1, 0], [0.1, 4, 0], [0, 0, 2.0]]))
 
 
-def test_diagonal_loglik_batch_with_missing_components_in_some_rows(rng):
-    """A batch where only some rows miss a component: those rows drop its term, the others are unchanged."""
+def _masked_loglik(residual, R):
+    """The diagonal-R log-likelihood written the plain way: missing components masked first, then summed."""
+    diag = np.diag(R)
+    valid = ~np.isnan(residual)
+    r = np.where(valid, residual, 0.0)
+    return -0.5 * (r * r / diag + np.where(valid, np.log(diag) + np.log(2.0 * np.pi), 0.0)).sum(axis=-1)
+
+
+def test_diagonal_loglik_gives_the_bits_of_masking_first(rng):
+    """gaussian_loglik takes the missing components out only where a sum is NaN: the same bits, any layout."""
     R = np.diag([1.0, 4.0, 2.0])
-    res = rng.standard_normal((4, 50, 3))
-    full = gaussian_loglik(res, R)
-    scale = np.sqrt(np.diag(R))
-    np.testing.assert_allclose(full, stats.norm(0, scale).logpdf(res).sum(axis=-1), rtol=1e-12)
-    holed = res.copy()
+    base = rng.standard_normal((4, 50, 3))
+    holed = base.copy()
     holed[1, 7, 1] = np.nan
     holed[3, :, 0] = np.nan
-    got = gaussian_loglik(holed, R)
+    holed[2, 5] = np.nan  # nothing measured in that row: log-likelihood 0
+    cases = {
+        "C": base, "F": np.asfortranarray(base), "transposed": rng.standard_normal((3, 50, 4)).T,
+        "strided": rng.standard_normal((4, 100, 6))[:, ::2, ::2], "missing": holed,
+        "missing, F": np.asfortranarray(holed), "float32": holed.astype(np.float32),
+        "broadcast against R": base[..., :1], "overflow": np.where(base > 2.0, 1e200, holed),
+    }
+    for name, residual in cases.items():
+        with np.errstate(over="ignore"):  # 1e200² overflows to inf in both, as it should
+            got, want = gaussian_loglik(residual, R), _masked_loglik(residual, R)
+        assert got.dtype == want.dtype and got.shape == want.shape, name
+        assert np.array_equal(got, want), name
+    scale = np.sqrt(np.diag(R))
     want = np.where(np.isnan(holed), 0.0, stats.norm(0, scale).logpdf(np.nan_to_num(holed))).sum(axis=-1)
-    np.testing.assert_allclose(got, want, rtol=1e-12)
-    untouched = np.ones(full.shape, dtype=bool)
-    untouched[1, 7] = untouched[3] = False
-    assert np.array_equal(got[untouched], full[untouched])  # the same bits where nothing is missing
-    assert np.all(np.isfinite(got))
+    np.testing.assert_allclose(gaussian_loglik(holed, R), want, rtol=1e-12)
+    assert gaussian_loglik(holed, R)[2, 5] == 0.0
     assert gaussian_loglik(np.array([1, 2, 0]), R) == gaussian_loglik(np.array([1.0, 2.0, 0.0]), R)  # integer residuals
 
 

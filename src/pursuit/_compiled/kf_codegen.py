@@ -47,8 +47,8 @@ four zero patterns and the source of the helpers it inlines
 from __future__ import annotations
 
 import hashlib
+import importlib.resources
 import math
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -77,7 +77,8 @@ def depends_digest() -> str:
     load the old arithmetic from the kernel folder, which outlives the
     installation (``~/.cache/pursuit/kernels``).
     """
-    return hashlib.sha256((Path(__file__).parent / "common.py").read_bytes()).hexdigest()[:16]
+    source = importlib.resources.files(__package__).joinpath("common.py").read_bytes()  # also from a zip
+    return hashlib.sha256(source).hexdigest()[:16]
 
 
 def structure_key(F: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray) -> tuple:

@@ -50,21 +50,28 @@ def gaussian_loglik(residual: np.ndarray, R: np.ndarray) -> np.ndarray:
     Missing (NaN) components are marginalised out exactly when R is
     diagonal.  With a full R, a residual containing NaN raises ``ValueError``.
     """
-    residual = np.asarray(residual, dtype=float)  # no copy for float64 input
+    residual = np.asarray(residual)
+    if residual.dtype.kind not in "fc":  # integers, booleans, objects; float32 is squared as float32, as it always was
+        residual = residual.astype(float)
     diag = np.diag(R)
     if np.count_nonzero(R - np.diag(diag)) == 0:
         norm = np.log(diag) + _LOG_2PI
-        # r²/σ² + log(2π σ²) per component, in place (the particle filters call this on (runs, N, m)
-        # arrays every step); a sum is NaN only where a component is missing (NaN; each term is
-        # finite, +inf or NaN), and only then are the missing components' terms taken out
+        # r²/σ² + log(2π σ²) per component, in place where the layout allows (particle filters call
+        # this on (runs, N, m) arrays every step); then, only where a row's sum is NaN, each
+        # missing (NaN) component's term is replaced by the one a zero residual gives, 0/σ² + 0, so
+        # the result is that of masking the missing components first, bit for bit
         terms = np.multiply(residual, residual)
-        terms /= diag
+        if terms.dtype == np.float64 and terms.shape[-1:] == diag.shape:
+            terms /= diag
+        else:  # float32 or complex squares, or a residual broadcast against R
+            terms = terms / diag
         terms += norm
         total = terms.sum(axis=-1)
         if np.isnan(total).any():
-            valid = ~np.isnan(residual)
-            r = np.where(valid, residual, 0.0)
-            total = np.where(valid, r * r / diag + norm, 0.0).sum(axis=-1)
+            missing = np.broadcast_to(np.isnan(residual), terms.shape)
+            if missing.any():
+                terms[missing] = 0.0 / np.broadcast_to(diag, terms.shape)[missing] + 0.0
+                total = terms.sum(axis=-1)
         return -0.5 * total
     if np.isnan(residual).any():
         raise ValueError("missing measurement components need a diagonal measurement covariance")
