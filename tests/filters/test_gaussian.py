@@ -83,6 +83,29 @@ def test_nonlinear_filters_equal_the_kf_on_linear_models(motion, cls, rng):
     np.testing.assert_allclose(other.info["nis"], kf.info["nis"], rtol=1e-9, atol=1e-9)
 
 
+@pytest.mark.parametrize("cls", [pu.UnscentedKalmanFilter, pu.CubatureKalmanFilter])
+@pytest.mark.parametrize("batch", [(), (3,), (2, 3)])
+def test_sigma_point_filters_predict_a_built_in_linear_model_without_points(cls, batch, monkeypatch):
+    """F x, F P Fᵀ + Q, exactly symmetric, agreeing with the points' prediction of the same model given as a user's."""
+    motion = ConstantVelocity(ndim=2, dt=0.7, q=0.3, noise="continuous")
+    meas = LinearGaussian.position(4, motion.position_indices, 0.7)
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((*batch, 4))
+    A = rng.standard_normal((*batch, 4, 4))
+    P = A @ np.swapaxes(A, -1, -2) + 0.1 * np.eye(4)
+    fast = cls(motion, meas)
+    points = cls(Linear(motion.transition_matrix(), motion.cov()), meas)  # a user's model: the sigma points
+    want = points._predict(x, P, 1, None)
+    monkeypatch.setattr(cls, "_points", lambda *a: pytest.fail("sigma points drawn for a linear prediction"))
+    got = fast._predict(x, P, 1, None)
+    assert np.array_equal(got.mean, motion.f(x))
+    assert np.array_equal(got.propagated, np.swapaxes(got.propagated, -1, -2))
+    np.testing.assert_allclose(got.mean, want.mean, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(got.propagated, want.propagated, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(got.cross, want.cross, rtol=1e-12, atol=1e-12)
+    assert got.repaired is None
+
+
 @st.composite
 def stable_linear_models(draw):
     """Random linear-Gaussian models with a stable (spectral radius < 1.2) transition."""

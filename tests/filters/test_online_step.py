@@ -174,7 +174,9 @@ def test_the_one_run_path_runs(monkeypatch):
 def test_a_covariance_that_needs_a_repair_takes_the_general_step():
     filt = _filter("UKF")
     state = filt.init(pu.Gaussian(X0, np.eye(4)))
-    bad = np.diag([1.0, -1e-9, 1.0, 1.0])  # not positive definite: the sigma points need the repair
+    # not positive definite, nor is its prediction F P Fᵀ + Q (the linear motion is predicted without
+    # points): the update's sigma points need the repair
+    bad = np.diag([1.0, -2.0, 1.0, 1.0])
     state = pu.filters.GaussianState(mean=state.mean, cov=bad, k=0)
     new, info = filt.step(state, np.array([120.0, 3.1]))
     assert bool(info["repaired"])

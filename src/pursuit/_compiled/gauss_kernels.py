@@ -602,68 +602,41 @@ def _points(x, L, cscale, centre, chi):
 def _sigma_workspace(n, m, npts, B):
     """Scratch arrays of one block's UKF/CKF step (:func:`_sigma_predict_ws`, :func:`_sigma_correct_ws`).
 
-    ``(d, L, chi, Y, dY, dX, Z, zp, dZ, Pzz, Pxz, GT, E, D, update)``: the
-    Cholesky row scratch, the factor, the points (shared by the two halves:
-    the prediction's points are no longer needed when the update redraws
-    them), their images, and :func:`_update_workspace`'s arrays.
+    ``(d, L, chi, Z, zp, dZ, Pzz, Pxz, GT, E, D, update)``: the Cholesky row
+    scratch, the factor (P Fᵀ in the prediction, which needs no factor), the
+    points, their images, and :func:`_update_workspace`'s arrays.
     """
-    return (np.empty(B), np.empty((n, n, B)), np.empty((npts, n, B)), np.empty((npts, n, B)), np.empty((npts, n, B)),
-            np.empty((npts, n, B)), np.empty((npts, m, B)), np.empty((m, B)), np.empty((npts, m, B)),
-            np.empty((m, m, B)), np.empty((n, m, B)), np.empty((m, n, B)), np.empty((npts, m, B)), np.empty((m, m, B)),
-            _update_workspace(n, m, B))
+    return (np.empty(B), np.empty((n, n, B)), np.empty((npts, n, B)), np.empty((npts, m, B)), np.empty((m, B)),
+            np.empty((npts, m, B)), np.empty((m, m, B)), np.empty((n, m, B)), np.empty((m, n, B)), np.empty((npts, m, B)),
+            np.empty((m, m, B)), _update_workspace(n, m, B))
 
 
 @njit(**_NJ)
 def _sigma_predict_ws(xb, Pb, prediction, sigma, okb, pred, with_cross, ws):
-    """The UKF/CKF's prediction of one block: points of ``(xb, Pb)`` through F, into ``pred = (xp, Pp, cross)``.
+    """The UKF/CKF's prediction of one block into ``pred = (xp, Pp, cross)``: F x, F P Fᵀ, without points.
 
-    ``cross`` (the smoother's cross-covariance) is written only if
-    ``with_cross``; ``xp`` and ``Pp`` are the same bits either way.
+    The motion is linear (F, Q), and the unscented transform of a linear map
+    is exact, so the points' moments are F x, F P Fᵀ and P Fᵀ: the
+    arithmetic of :func:`_ekf_step`'s prediction, symmetrised as the points'
+    sum was (:meth:`pursuit.filters.gaussian._SigmaPointFilter._predict`
+    likewise).  ``cross`` (the smoother's cross-covariance) is written only if
+    ``with_cross`` (the factor's scratch ``ws[1]`` holds P Fᵀ otherwise);
+    ``xp`` and ``Pp`` are the same bits either way.  ``sigma`` and ``okb``
+    are not read: a covariance that does not factor is flagged where the
+    update draws its points.
     """
     F, Q, lam = prediction
-    cscale, wm, wc, centre = sigma
     xp, Pp, cross = pred
-    d, L, chi, Y, dY, dX = ws[0], ws[1], ws[2], ws[3], ws[4], ws[5]
-    n, B = xb.shape
-    npts = wm.shape[0]
-    _chol_ws(Pb, L, okb, d)
-    _points(xb, L, cscale, centre, chi)
-    for s in range(npts):
-        _cmv(F, chi[s], Y[s])
-    xp[:] = 0.0
-    for s in range(npts):
-        w = wm[s]
-        for i in range(n):
-            for c in range(B):
-                xp[i, c] += w * Y[s, i, c]
-    for s in range(npts):
-        for i in range(n):
-            for c in range(B):
-                dY[s, i, c] = Y[s, i, c] - xp[i, c]
-    Pp[:] = 0.0
-    for s in range(npts):
-        w = wc[s]
-        for i in range(n):
-            for j in range(n):
-                for c in range(B):
-                    Pp[i, j, c] += dY[s, i, c] * w * dY[s, j, c]
-    if with_cross:
-        for s in range(npts):
-            for i in range(n):
-                for c in range(B):
-                    dX[s, i, c] = chi[s, i, c] - xb[i, c]
-        cross[:] = 0.0
-        for s in range(npts):
-            w = wc[s]
-            for i in range(n):
-                for j in range(n):
-                    for c in range(B):
-                        cross[i, j, c] += dX[s, i, c] * w * dY[s, j, c]
+    n = xb.shape[0]
+    PFt = cross if with_cross else ws[1]
+    _cmv(F, xb, xp)
+    _mmT_c(Pb, F, PFt)
+    _cmm(F, PFt, Pp)
     _symmetrize(Pp)
     for i in range(n):
         for j in range(n):
             q = Q[i, j]
-            for c in range(B):
+            for c in range(xb.shape[1]):
                 Pp[i, j, c] = (Pp[i, j, c] if lam == 1.0 else lam * Pp[i, j, c]) + q
 
 
@@ -754,7 +727,7 @@ def _sigma_correct_ws(xp, Pp, zb, vb, sensor, sigma, blk, ws):
     m = zb.shape[0]
     npts = wm.shape[0]
     okb = blk[7]
-    d, L, chi, Z, zp, dZ, Pzz, Pxz, GT, E, D = ws[0], ws[1], ws[2], ws[6], ws[7], ws[8], ws[9], ws[10], ws[11], ws[12], ws[13]
+    d, L, chi, Z, zp, dZ, Pzz, Pxz, GT, E, D = ws[0], ws[1], ws[2], ws[3], ws[4], ws[5], ws[6], ws[7], ws[8], ws[9], ws[10]
     # measurement: points redrawn from the prediction
     _chol_ws(Pp, L, okb, d)
     _points(xp, L, cscale, centre, chi)
@@ -805,7 +778,7 @@ def _sigma_correct_ws(xp, Pp, zb, vb, sensor, sigma, blk, ws):
             for b in range(m):
                 for c in range(B):
                     D[a, b, c] += E[s, a, c] * w * E[s, b, c]
-    _update_ws((xp, Pp, zp, Pzz, Pxz, L, GT, D), (zb, vb), sensor, blk, ws[14])
+    _update_ws((xp, Pp, zp, Pzz, Pxz, L, GT, D), (zb, vb), sensor, blk, ws[11])
 
 
 def _sigma_step(state, obs, prediction, sensor, sigma, out):

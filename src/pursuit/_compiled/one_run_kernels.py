@@ -305,7 +305,7 @@ def sigma_one_scalar(x, P, z, prediction, sensor, sigma, out):
     m = z.shape[0]
     npts = wm.shape[0]
     w = max(n, m)
-    ws = np.empty((2 + n + 3 * npts + 3 * npts + 3 * m + n + _update_rows(n, m), w))
+    ws = np.empty((2 + n + npts + 3 * npts + 3 * m + n + _update_rows(n, m), w))
     v = ws[0, :m]
     if _measured(z, v):
         return 1
@@ -314,9 +314,7 @@ def sigma_one_scalar(x, P, z, prediction, sensor, sigma, out):
     L = ws[2:2 + n, :n]
     r = 2 + n
     chi = ws[r:r + npts, :n]
-    Y = ws[r + npts:r + 2 * npts, :n]
-    dY = ws[r + 2 * npts:r + 3 * npts, :n]
-    r += 3 * npts
+    r += npts
     Z = ws[r:r + npts, :m]
     dZ = ws[r + npts:r + 2 * npts, :m]
     E = ws[r + 2 * npts:r + 3 * npts, :m]
@@ -327,38 +325,24 @@ def sigma_one_scalar(x, P, z, prediction, sensor, sigma, out):
     Pxz = ws[r + 3 * m:r + 3 * m + n, :m]
     upd = ws[r + 3 * m + n:, :]
     off = 1 if centre else 0
-    # predict: points of (x, P), pushed through F
-    ok = _chol(P, L)
-    _points(x, L, cscale, centre, chi)
-    for s in range(npts):
-        for i in range(n):
-            o = 0.0
-            for j in range(n):
-                o += F[i, j] * chi[s, j]
-            Y[s, i] = o
+    # predict: xp = F x, cross = P Fᵀ, P⁻ = F cross, symmetrised (then λ, Q): the linear motion's
+    # exact moments, as gauss_kernels._sigma_predict_ws, without points
     for i in range(n):
         o = 0.0
-        for s in range(npts):
-            o += wm[s] * Y[s, i]
+        for j in range(n):
+            o += F[i, j] * x[j]
         xp[i] = o
-    for s in range(npts):
-        for i in range(n):
-            dY[s, i] = Y[s, i] - xp[i]
-            chi[s, i] = chi[s, i] - x[i]  # dX, in place: the points are not needed again
     for i in range(n):
         for j in range(n):
-            a = 0.0
-            b = 0.0
-            for s in range(npts):
-                w = wc[s]
-                a += dY[s, i] * w * dY[s, j]
-                b += chi[s, i] * w * dY[s, j]
-            Pp[i, j] = a
-            cross[i, j] = b
+            o = 0.0
+            for p in range(n):
+                o += P[i, p] * F[j, p]
+            cross[i, j] = o
+    _mm(F, cross, Pp)
     _symmetrize(Pp)
     _predict_moments(Pp, Q, lam)
     # measurement: points redrawn from the prediction
-    ok &= _chol(Pp, L)
+    ok = _chol(Pp, L)
     _points(xp, L, cscale, centre, chi)
     for s in range(npts):
         h_sigma_row(sensor, chi, s, Z, s)

@@ -1236,6 +1236,15 @@ class _SigmaPointFilter(_GaussianFilter):
         return np.concatenate(parts, axis=-2), wm, wc, repaired, L, np.vstack(unit)
 
     def _predict(self, x, P, k, dt):
+        fixed = self._motion_one(k, dt)
+        if fixed is not None:
+            # A built-in linear model, f(x) = F x: the unscented transform of a linear map is exact,
+            # so its moments are the Kalman filter's F x, F P Fᵀ and P Fᵀ, without the points: a
+            # third of a batched step.  Symmetrised as the points' sum is.
+            F, Q = fixed
+            PFt = P @ _t(F)
+            mean = np.asarray(call_with_dt(self.motion.f, x, k, dt=dt), dtype=float)
+            return _Prediction(mean, symmetrize(F @ PFt), Q, PFt)
         chi, wm, wc, repaired = self._points(x, P)
         Y = np.asarray(call_with_dt(self.motion.f, chi, k, dt=dt), dtype=float)
         mean = np.matmul(wm, Y)
@@ -1289,6 +1298,11 @@ class _SigmaPointFilter(_GaussianFilter):
         return x + xi.dot(L.T), wm, wc, L, xi, root
 
     def _predict_one(self, x, P, k, dt):
+        fixed = self._motion_one(k, dt)
+        if fixed is not None:  # a built-in linear model: exact without the points, as _predict
+            F, Q = fixed
+            PFt = P.dot(F.T)
+            return _OnePrediction(F.dot(x), _sym(F.dot(PFt)), Q, PFt)
         pts = self._points_one(x, P)
         Q = np.asarray(call_with_dt(self.motion.cov, k, dt=dt), dtype=float)
         if pts is None or Q.ndim != 2:
@@ -1343,7 +1357,12 @@ class UnscentedKalmanFilter(_SigmaPointFilter):
     Notes
     -----
     Sigma points are redrawn from the predicted Gaussian before the
-    measurement update.
+    measurement update.  With a built-in linear motion model (the
+    kinematic models, :class:`~pursuit.models.LinearMotion`) the prediction
+    is F x, F P Fᵀ + Q, which the unscented transform of a linear map gives
+    exactly, and no points are drawn for it; a posterior covariance that is
+    not positive definite is then repaired (and flagged) only where the
+    update's points need it.
     """
 
     alpha: float = 1.0
@@ -1380,7 +1399,9 @@ class UnscentedKalmanFilter(_SigmaPointFilter):
 class CubatureKalmanFilter(_SigmaPointFilter):
     """Cubature Kalman filter (third-degree spherical-radial rule).
 
-    ``2n`` points x ± √n·(columns of chol P), each with weight 1/(2n).
+    ``2n`` points x ± √n·(columns of chol P), each with weight 1/(2n).  As
+    for :class:`UnscentedKalmanFilter`, a built-in linear motion model is
+    predicted exactly (F x, F P Fᵀ + Q) without points.
     """
 
     def _default_name(self) -> str:
