@@ -106,6 +106,26 @@ def test_sigma_point_filters_predict_a_built_in_linear_model_without_points(cls,
     assert got.repaired is None
 
 
+@pytest.mark.parametrize("cls", [pu.UnscentedKalmanFilter, pu.CubatureKalmanFilter])
+@pytest.mark.parametrize("how", ["nothing measured", "gated"])
+def test_a_kept_prediction_of_a_covariance_that_needed_a_repair_is_the_repaired_one(cls, how):
+    """A posterior that is not positive definite, a linear motion (predicted without points): the update's points
+    repair P⁻, and a step that keeps the prediction keeps that repaired, positive-definite P⁻."""
+    motion = ConstantVelocity(ndim=2, dt=1.0, q=0.1, noise="continuous")
+    meas = LinearGaussian.position(4, motion.position_indices, 1.0)
+    filt = cls(motion, meas, gate=0.99) if how == "gated" else cls(motion, meas)
+    bad = np.diag([1.0, -2.0, 1.0, 1.0])  # F P Fᵀ + Q is not positive definite either
+    state = pu.filters.GaussianState(mean=np.zeros((2, 4)), cov=np.broadcast_to(bad, (2, 4, 4)).copy(), k=0)
+    z = np.full((2, 2), np.nan) if how == "nothing measured" else np.full((2, 2), 1e6)
+    new, info = filt.step(state, z)
+    assert info["repaired"].all()
+    if how == "gated":
+        assert info["gated"].all()
+    assert np.all(np.linalg.eigvalsh(new.cov) > 0)
+    np.testing.assert_allclose(new.cov, info["pred_cov"], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(new.mean, info["pred_mean"], rtol=0, atol=0)
+
+
 @st.composite
 def stable_linear_models(draw):
     """Random linear-Gaussian models with a stable (spectral radius < 1.2) transition."""

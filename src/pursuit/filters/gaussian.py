@@ -573,6 +573,7 @@ class _GaussianFilter(FilterBase):
         P_pred = _scale(lam, pred.propagated) + pred.Q
 
         meas = self._measure(pred.mean, P_pred, k)
+        P_pred = _as_factored(P_pred, meas)
         mean, cov, info = _update(pred.mean, P_pred, z, ~np.isnan(z), meas, self.measurement, k)
         if fade.skip is not None:
             # The strategy's own gate: those runs keep the prediction, while the
@@ -620,6 +621,7 @@ class _GaussianFilter(FilterBase):
         pred = self._predict(state.mean, _core(state.cov), k, dt)
         P_pred = _scale(np.asarray(self.fading.lam, dtype=float), pred.propagated) + pred.Q
         meas = self._measure(pred.mean, P_pred, k)
+        P_pred = _as_factored(P_pred, meas)
         R = np.asarray(self.measurement.cov(k), dtype=float)
         S, S_inv, K, cov = _gain_and_cov(P_pred, meas, R, R, meas.Pzz, meas.Pxz, meas.H, meas.D)
         return UpdateMoments(pred.mean, symmetrize(P_pred), meas.zp, K, S_inv, logdet_spd(S), symmetrize(cov), self.measurement)
@@ -634,6 +636,7 @@ class _GaussianFilter(FilterBase):
     def _trial(self, pred: _Prediction, lam: np.ndarray, z: np.ndarray, k: int):
         P_pred = _scale(lam, pred.propagated) + pred.Q
         meas = self._measure(pred.mean, P_pred, k)
+        P_pred = _as_factored(P_pred, meas)
         mean, cov, _ = _update(pred.mean, P_pred, z, ~np.isnan(z), meas, self.measurement, k)
         return mean, cov
 
@@ -654,6 +657,19 @@ def _any_repaired(batch, *flags) -> np.ndarray:
         if f is not None:
             out = out | np.broadcast_to(f, batch)
     return out
+
+
+def _as_factored(P_pred: np.ndarray, meas: _Measured) -> np.ndarray:
+    """P⁻ as the update's sigma points saw it: L Lᵀ of the repaired matrix where their factor needed a repair.
+
+    A step that keeps the prediction (nothing measured, a gate, a fading
+    strategy's skip) then keeps a positive-definite P⁻, as the update did.
+    """
+    rep = meas.repaired
+    if rep is None or not np.any(rep):
+        return P_pred
+    fixed = symmetrize(meas.L @ _t(meas.L))
+    return np.where(np.asarray(rep)[..., None, None], fixed, P_pred)
 
 
 def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k):
@@ -1361,8 +1377,11 @@ class UnscentedKalmanFilter(_SigmaPointFilter):
     kinematic models, :class:`~pursuit.models.LinearMotion`) the prediction
     is F x, F P Fᵀ + Q, which the unscented transform of a linear map gives
     exactly, and no points are drawn for it; a posterior covariance that is
-    not positive definite is then repaired (and flagged) only where the
-    update's points need it.
+    not positive definite is then repaired (and flagged) where the update's
+    points need it, and a step that keeps the prediction keeps the repaired
+    one.  A subclass's own ``sigma_weights`` must reproduce the mean and
+    covariance (as every sigma-point rule does), since the prediction no
+    longer reads them for these models.
     """
 
     alpha: float = 1.0
