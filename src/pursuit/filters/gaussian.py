@@ -502,7 +502,9 @@ class _GaussianFilter(FilterBase):
 
         Those models' F and Q depend on ``dt`` alone (not on ``k`` or ``x``)
         and are read-only, so the one-run step reads them from this cache
-        instead of calling the model twice per step.
+        instead of calling the model twice per step; the sigma-point filters'
+        predictions (batched and one-run) also take it as the sign that f is
+        F x, to predict without points.
         """
         cache = self.__dict__.get("_one_run_motion")
         if cache is None:
