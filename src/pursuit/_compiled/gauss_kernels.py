@@ -135,6 +135,18 @@ def _bmmT(A, B, out):
 
 
 @njit(**_NJ)
+def _add_process_noise(Pp, Q, lam):
+    """P⁻ = (F P Fᵀ if λ = 1 else λ F P Fᵀ) + Q in place on a block (``one_run_kernels._predict_moments`` for one run)."""
+    n = Q.shape[0]
+    for i in range(n):
+        for j in range(n):
+            q = Q[i, j]
+            p = Pp[i, j]
+            for c in range(p.shape[0]):
+                p[c] = (p[c] if lam == 1.0 else lam * p[c]) + q
+
+
+@njit(**_NJ)
 def _symmetrize(P):
     n = P.shape[0]
     for i in range(n):
@@ -473,11 +485,7 @@ def _ekf_step(state, obs, prediction, sensor, out):
         _mmT_c(Pb, F, cross)
         Pp = np.empty((n, n, B))
         _cmm(F, cross, Pp)
-        for i in range(n):
-            for j in range(n):
-                q = Q[i, j]
-                for c in range(B):
-                    Pp[i, j, c] = (Pp[i, j, c] if lam == 1.0 else lam * Pp[i, j, c]) + q
+        _add_process_noise(Pp, Q, lam)
         xo, Po = np.empty((n, B)), np.empty((n, n, B))
         inb, Sb = np.empty((m, B)), np.empty((m, m, B))
         nb, lb = np.empty(B), np.empty(B)
@@ -549,11 +557,7 @@ def _ekf_sequence(prior, obs, prediction, sensor, keep_cov, out):
             _cmv(F, xb, xp)
             _mmT_c(Pb, F, cross)
             _cmm(F, cross, Pp)
-            for i in range(n):
-                for j in range(n):
-                    q = Q[i, j]
-                    for c in range(B):
-                        Pp[i, j, c] = (Pp[i, j, c] if lam == 1.0 else lam * Pp[i, j, c]) + q
+            _add_process_noise(Pp, Q, lam)
             _h_block(sensor, xp, zp)
             _jac_block(sensor, xp, H)
             _bmmT(Pp, H, PHt)
@@ -612,7 +616,7 @@ def _sigma_workspace(n, m, npts, B):
 
 
 @njit(**_NJ)
-def _sigma_predict_ws(xb, Pb, prediction, sigma, okb, pred, with_cross, ws):
+def _sigma_predict_ws(xb, Pb, prediction, pred, with_cross, ws):
     """The UKF/CKF's prediction of one block into ``pred = (xp, Pp, cross)``: F x, F P Fᵀ, without points.
 
     The motion is linear (F, Q), and the unscented transform of a linear map
@@ -621,23 +625,18 @@ def _sigma_predict_ws(xb, Pb, prediction, sigma, okb, pred, with_cross, ws):
     sum was (:meth:`pursuit.filters.gaussian._SigmaPointFilter._predict`
     likewise).  ``cross`` (the smoother's cross-covariance) is written only if
     ``with_cross`` (the factor's scratch ``ws[1]`` holds P Fᵀ otherwise);
-    ``xp`` and ``Pp`` are the same bits either way.  ``sigma`` and ``okb``
-    are not read: a covariance that does not factor is flagged where the
-    update draws its points.
+    ``xp`` and ``Pp`` are the same bits either way.  Nothing is factored: a
+    covariance that does not factor is flagged where the update draws its
+    points.
     """
     F, Q, lam = prediction
     xp, Pp, cross = pred
-    n = xb.shape[0]
     PFt = cross if with_cross else ws[1]
     _cmv(F, xb, xp)
     _mmT_c(Pb, F, PFt)
     _cmm(F, PFt, Pp)
     _symmetrize(Pp)
-    for i in range(n):
-        for j in range(n):
-            q = Q[i, j]
-            for c in range(xb.shape[1]):
-                Pp[i, j, c] = (Pp[i, j, c] if lam == 1.0 else lam * Pp[i, j, c]) + q
+    _add_process_noise(Pp, Q, lam)
 
 
 @njit(**_NJ)
@@ -802,7 +801,7 @@ def _sigma_step(state, obs, prediction, sensor, sigma, out):
         okb = np.ones(B, dtype=np.bool_)
         ws = _sigma_workspace(n, m, npts, B)
         xp, Pp, cross = np.empty((n, B)), np.empty((n, n, B)), np.empty((n, n, B))
-        _sigma_predict_ws(xb, Pb, prediction, sigma, okb, (xp, Pp, cross), True, ws)
+        _sigma_predict_ws(xb, Pb, prediction, (xp, Pp, cross), True, ws)
         xo, Po = np.empty((n, B)), np.empty((n, n, B))
         inb, Sb = np.empty((m, B)), np.empty((m, m, B))
         nb, lb = np.empty(B), np.empty(B)
@@ -857,7 +856,7 @@ def _sigma_sequence(prior, obs, prediction, sensor, sigma, keep_cov, out):
                 for c in range(B):
                     zb[a, c] = zs[k, a, r0 + c]
                     vb[a, c] = 1.0 if valid[k, a, r0 + c] else 0.0
-            _sigma_predict_ws(xb, Pb, prediction, sigma, okb, (xp, Pp, cross), False, ws)
+            _sigma_predict_ws(xb, Pb, prediction, (xp, Pp, cross), False, ws)
             _sigma_correct_ws(xp, Pp, zb, vb, sensor, sigma, (xo, Po, inb, Sb, nb, db, lb, okb), ws)
             for c in range(B):
                 r = r0 + c

@@ -71,7 +71,7 @@ from ..rng import RNGLike
 from .base import FilterBase, as_gaussian, prior_batch
 from .cs import AxisState, _matrices, _matrices_for, check_adaptation_params, chi2_threshold
 from .gating import apply_gate
-from .gaussian import ExtendedKalmanFilter, UnscentedKalmanFilter, _as_factored, _update
+from .gaussian import ExtendedKalmanFilter, UnscentedKalmanFilter, _update
 from .jacobians import measurement_jacobian
 
 __all__ = ["NonlinearCSFilter", "ADAPTATIONS"]
@@ -383,8 +383,7 @@ class NonlinearCSFilter(FilterBase):
         self, x_pred: np.ndarray, P_pred: np.ndarray, z: np.ndarray, k: int
     ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         """The EKF or UKF update at the prediction ``(x_pred, P_pred)`` in NumPy: ``(mean, cov, info)``, info with ``repaired``."""
-        meas = self._inner._measure(x_pred, P_pred, k)
-        P_pred = _as_factored(P_pred, meas)
+        meas, P_pred = self._inner._measure_factored(x_pred, P_pred, k)
         mean, cov, info = _update(x_pred, P_pred, z, ~np.isnan(z), meas, self.measurement, k)
         info = dict(info)
         info["repaired"] = np.broadcast_to(meas.repaired if meas.repaired is not None else False, x_pred.shape[:-1])

@@ -574,8 +574,7 @@ class _GaussianFilter(FilterBase):
         lam = np.asarray(fade.lam, dtype=float)
         P_pred = _scale(lam, pred.propagated) + pred.Q
 
-        meas = self._measure(pred.mean, P_pred, k)
-        P_pred = _as_factored(P_pred, meas)
+        meas, P_pred = self._measure_factored(pred.mean, P_pred, k)
         mean, cov, info = _update(pred.mean, P_pred, z, ~np.isnan(z), meas, self.measurement, k)
         if fade.skip is not None:
             # The strategy's own gate: those runs keep the prediction, while the
@@ -622,8 +621,7 @@ class _GaussianFilter(FilterBase):
         dt = time_step(dt, k)
         pred = self._predict(state.mean, _core(state.cov), k, dt)
         P_pred = _scale(np.asarray(self.fading.lam, dtype=float), pred.propagated) + pred.Q
-        meas = self._measure(pred.mean, P_pred, k)
-        P_pred = _as_factored(P_pred, meas)
+        meas, P_pred = self._measure_factored(pred.mean, P_pred, k)
         R = np.asarray(self.measurement.cov(k), dtype=float)
         S, S_inv, K, cov = _gain_and_cov(P_pred, meas, R, R, meas.Pzz, meas.Pxz, meas.H, meas.D)
         return UpdateMoments(pred.mean, symmetrize(P_pred), meas.zp, K, S_inv, logdet_spd(S), symmetrize(cov), self.measurement)
@@ -635,10 +633,14 @@ class _GaussianFilter(FilterBase):
     def _measure(self, x_pred: np.ndarray, P_pred: np.ndarray, k: int) -> _Measured:
         raise NotImplementedError
 
+    def _measure_factored(self, x_pred: np.ndarray, P_pred: np.ndarray, k: int) -> tuple[_Measured, np.ndarray]:
+        """:meth:`_measure`, and P⁻ as its points saw it (:func:`_as_factored`): what a step that keeps the prediction keeps."""
+        meas = self._measure(x_pred, P_pred, k)
+        return meas, _as_factored(P_pred, meas)
+
     def _trial(self, pred: _Prediction, lam: np.ndarray, z: np.ndarray, k: int):
         P_pred = _scale(lam, pred.propagated) + pred.Q
-        meas = self._measure(pred.mean, P_pred, k)
-        P_pred = _as_factored(P_pred, meas)
+        meas, P_pred = self._measure_factored(pred.mean, P_pred, k)
         mean, cov, _ = _update(pred.mean, P_pred, z, ~np.isnan(z), meas, self.measurement, k)
         return mean, cov
 
