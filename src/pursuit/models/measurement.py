@@ -70,7 +70,11 @@ def gaussian_loglik(residual: np.ndarray, R: np.ndarray) -> np.ndarray:
         if np.isnan(total).any():
             missing = np.broadcast_to(np.isnan(residual), terms.shape)
             if missing.any():
-                terms[missing] = 0.0 / np.broadcast_to(diag, terms.shape)[missing] + 0.0
+                zero_terms = 0.0 / diag + 0.0
+                if not zero_terms.any():  # every σ² positive: a missing component adds exactly +0.0
+                    np.putmask(terms, missing, 0.0)  # a boolean-indexed store costs 5x more here
+                else:
+                    np.copyto(terms, np.broadcast_to(zero_terms, terms.shape), where=missing)
                 total = terms.sum(axis=-1)
         return -0.5 * total
     if np.isnan(residual).any():
