@@ -126,6 +126,34 @@ def test_a_kept_prediction_of_a_covariance_that_needed_a_repair_is_the_repaired_
     np.testing.assert_allclose(new.mean, info["pred_mean"], rtol=0, atol=0)
 
 
+@pytest.mark.parametrize("cls", [pu.filters.KalmanFilter, pu.filters.ExtendedKalmanFilter, pu.filters.UnscentedKalmanFilter])
+def test_posterior_is_the_numpy_steps_mean_and_covariance_bit_for_bit(cls, rng):
+    """posterior() skips the info only: mean, covariance and repair flags are numpy_step's, missing components,
+    a covariance that needs a repair and a shared covariance included; None where the step does more."""
+    motion = ConstantVelocity(ndim=2, dt=1.0, q=0.1, noise="continuous")
+    meas = LinearGaussian.position(4, motion.position_indices, 0.5)
+    filt = cls(motion, meas)
+    cov = np.broadcast_to(np.eye(4), (3, 5, 4, 4)).copy()
+    cov[0, 1] = np.diag([1.0, -2.0, 1.0, 1.0])  # repaired at the update's factorisation
+    state = pu.filters.GaussianState(mean=rng.standard_normal((3, 5, 4)), cov=cov, k=0)
+    z = rng.standard_normal((3, 5, 2))
+    z[1, 2, 0] = np.nan  # one component missing
+    z[2, 3] = np.nan  # nothing measured
+    shared = pu.filters.GaussianState(mean=state.mean, cov=np.eye(4), k=0)
+    flags = []
+    for st_ in (state, shared):
+        want, info = filt.numpy_step(st_, z, 1, None)
+        mean, cov_out, repaired = filt.posterior(st_, z, 1)
+        assert np.array_equal(mean, want.mean) and np.array_equal(cov_out, want.cov)
+        assert np.array_equal(repaired, info["repaired"])
+        flags.append(repaired)
+    assert flags[0].shape == flags[1].shape == (3, 5) and not flags[1].any()
+    if cls is pu.filters.UnscentedKalmanFilter:  # the sigma points factor P⁻, and repair it
+        assert flags[0][0, 1] and flags[0].sum() == 1
+    assert cls(motion, meas, gate=0.99).posterior(state, z, 1) is None
+    assert cls(motion, meas, fading=pu.filters.StrongTracking()).posterior(state, z, 1) is None
+
+
 @st.composite
 def stable_linear_models(draw):
     """Random linear-Gaussian models with a stable (spectral radius < 1.2) transition."""

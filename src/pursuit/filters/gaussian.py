@@ -626,6 +626,32 @@ class _GaussianFilter(FilterBase):
         S, S_inv, K, cov = _gain_and_cov(P_pred, meas, R, R, meas.Pzz, meas.Pxz, meas.H, meas.D)
         return UpdateMoments(pred.mean, symmetrize(P_pred), meas.zp, K, S_inv, logdet_spd(S), symmetrize(cov), self.measurement)
 
+    def posterior(
+        self, state: GaussianState, z: np.ndarray, k: int, dt: float | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The NumPy step's posterior mean, covariance and ``repaired`` flags, without its info.
+
+        For callers that discard the info of a batch of steps (the partial
+        UPF's UKF per particle): NIS, log det S and the info arrays are not
+        made.  The mean and covariance are :meth:`numpy_step`'s, bit for
+        bit.  ``z`` must already be checked and broadcast to ``(*batch, m)``
+        (NaN: missing), as :meth:`numpy_step` takes it.  None where the step
+        is more than predict-and-update (a ``gate``, a fading strategy other
+        than a constant factor, a subclass with a step of its own): the
+        caller then runs :meth:`step`.
+        """
+        own = type(self).step is _GaussianFilter.step and type(self).numpy_step is _GaussianFilter.numpy_step
+        if self.gate is not None or type(self.fading) is not Constant or not own:
+            return None
+        pred = self._predict(state.mean, _core(state.cov), k, dt)
+        P_pred = _scale(np.asarray(self.fading.lam, dtype=float), pred.propagated) + pred.Q
+        meas, P_pred = self._measure_factored(pred.mean, P_pred, k)
+        mean, cov, _ = _update(pred.mean, P_pred, z, ~np.isnan(z), meas, self.measurement, k, with_info=False)
+        batch = state.batch
+        if cov.ndim == 2 and batch:
+            cov = np.broadcast_to(cov, (*batch, *cov.shape))
+        return mean, cov, _any_repaired(batch, pred.repaired, meas.repaired)
+
     # -- hooks --------------------------------------------------------------
     def _predict(self, x: np.ndarray, P: np.ndarray, k: int, dt: float | None) -> _Prediction:
         raise NotImplementedError
@@ -641,7 +667,7 @@ class _GaussianFilter(FilterBase):
     def _trial(self, pred: _Prediction, lam: np.ndarray, z: np.ndarray, k: int):
         P_pred = _scale(lam, pred.propagated) + pred.Q
         meas, P_pred = self._measure_factored(pred.mean, P_pred, k)
-        mean, cov, _ = _update(pred.mean, P_pred, z, ~np.isnan(z), meas, self.measurement, k)
+        mean, cov, _ = _update(pred.mean, P_pred, z, ~np.isnan(z), meas, self.measurement, k, with_info=False)
         return mean, cov
 
     def _linearize(self, pred: _Prediction, k: int) -> np.ndarray:
@@ -676,8 +702,13 @@ def _as_factored(P_pred: np.ndarray, meas: _Measured) -> np.ndarray:
     return np.where(np.asarray(rep)[..., None, None], fixed, P_pred)
 
 
-def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k):
-    """Kalman measurement update with missing components masked out."""
+def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k, with_info: bool = True):
+    """Kalman measurement update with missing components masked out.
+
+    ``with_info=False`` returns None for the info and skips what only the
+    info needs (NIS, log det S, the masked innovation): the mean and
+    covariance are the same arrays, bit for bit.
+    """
     R = np.asarray(measurement.cov(k), dtype=float)
     m = R.shape[-1]
     batch = x_pred.shape[:-1]
@@ -711,6 +742,8 @@ def _update(x_pred, P_pred, z, valid, meas: _Measured, measurement, k):
         # nothing measured: the prediction itself, not its factor's reconstruction L Lᵀ
         cov = np.where(measured[..., None, None], cov, P_pred)
     cov = symmetrize(cov)
+    if not with_info:
+        return mean, cov, None
 
     nis = quad(nu, S_inv)
     loglik = -0.5 * (nis + logdet_spd(S) + dof * _LOG_2PI)

@@ -310,15 +310,21 @@ class PartialUPF(ParticleFilterBase):
         batch_u = Xu.shape[:-1]  # (*b, n_u)
         zu = np.broadcast_to(z[..., None, :], (*batch_u, z.shape[-1]))
         gs = GaussianState(mean=Xu, cov=Pu, k=k - 1, memory=self._ukf.fading.init(batch_u))
-        post, _ = self._ukf.step(gs, zu, k=k, dt=dt)
-        L, rep = cholesky_psd(post.cov)
+        # the posterior alone (z is already checked): the UKF's info would be thrown away
+        moments = self._ukf.posterior(gs, zu, k, dt) if len(batch_u) > 1 or self._ukf._specs is None else None
+        if moments is None:
+            post, _ = self._ukf.step(gs, zu, k=k, dt=dt)
+            post_mean, post_cov = post.mean, post.cov
+        else:
+            post_mean, post_cov, _ = moments
+        L, rep = cholesky_psd(post_cov)
         xi = rng.standard_normal(Xu.shape)
-        x = post.mean + mv(L, xi)
+        x = post_mean + mv(L, xi)
         n = Xu.shape[-1]
         diagL = np.diagonal(L, axis1=-2, axis2=-1)
         log_q = -0.5 * np.einsum("...i,...i->...", xi, xi) - np.sum(np.log(diagL), axis=-1) - 0.5 * n * _LOG_2PI
         log_trans = self._transition_logpdf(x, Xu, k, dt)
-        return x, post.cov, log_trans - log_q, rep.reshape(batch_u).any(axis=-1)
+        return x, post_cov, log_trans - log_q, rep.reshape(batch_u).any(axis=-1)
 
     def _transition_logpdf(self, x, x_prev, k, dt):
         """log N(x; f(x_prev), Q) of the filter's full-rank model."""
