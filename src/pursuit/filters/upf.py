@@ -354,8 +354,8 @@ class PartialUPF(ParticleFilterBase):
             if order is None:
                 Xr, Pr_prev = X_prev, P_prev
             else:
-                Xr = np.take_along_axis(X_prev, order[..., n_u:, None], axis=-2)
-                Pr_prev = np.take_along_axis(P_prev, order[..., n_u:, None, None], axis=-3)
+                Xr = gather(X_prev, order[..., n_u:])
+                Pr_prev = gather(P_prev, order[..., n_u:])
             F = motion_jacobian(self._model, Xr, k, dt)
             Q = np.asarray(self._model.cov(k) if dt is None else self._model.cov(k, dt=dt), dtype=float)
             Pr = F @ Pr_prev @ np.swapaxes(F, -1, -2) + Q
@@ -369,5 +369,5 @@ def _split(X, P, order, n_u):
     if order is None:
         return X, np.asarray(P), None
     Xo = gather(X, order)
-    Pu = np.take_along_axis(P, order[..., :n_u, None, None], axis=-3)
+    Pu = gather(P, order[..., :n_u])  # whole rows: np.take_along_axis indexes each of the n² entries, ~40x slower here
     return Xo[..., :n_u, :], Pu, Xo[..., n_u:, :]
