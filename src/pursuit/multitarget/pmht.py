@@ -406,31 +406,54 @@ def _smooth(
         x_pred = np.einsum("ij,...j->...i", F, x) + u
         PFt = P @ F.T
         P_pred = F @ PFt + Q
-        x_pred = np.where(step[..., None], x_pred, x)
-        P_pred = np.where(step[..., None, None], P_pred, P)
-        cross = np.where(step[..., None, None], PFt, P)
+        cross = PFt
+        if not step.all():  # the selects are the identity on a step where every slot is active
+            x_pred = np.where(step[..., None], x_pred, x)
+            P_pred = np.where(step[..., None, None], P_pred, P)
+            cross = np.where(step[..., None, None], PFt, P)
         xp[:, :, b], Pp[:, :, b], C[:, :, b] = x_pred, P_pred, cross
-        upd = measured[..., b]
-        # R̃ = R / W without dividing (W may be tiny): S' = W H P⁻ H' + R = W S, gain K = W P⁻ H' S'⁻¹
-        Wb = np.where(upd, W[..., b], 0.0)[..., None, None]
-        Hb = H if H.ndim == 2 else H[:, :, b]
-        PHt = P_pred @ np.swapaxes(Hb, -1, -2)
-        S = Wb * (Hb @ PHt) + R
-        KtW = np.linalg.solve(S, np.swapaxes(PHt, -1, -2))  # S'⁻¹ H P⁻, i.e. Kᵀ / W
-        nu = zs[:, :, b] - np.einsum("...ij,...j->...i", Hb, x_pred)
-        x_upd = x_pred + Wb[..., 0] * np.einsum("...ji,...j->...i", KtW, nu)
-        P_upd = P_pred - Wb * (PHt @ KtW)
-        P_upd = 0.5 * (P_upd + np.swapaxes(P_upd, -1, -2))
-        x = np.where(upd[..., None], x_upd, x_pred)
-        P = np.where(upd[..., None, None], P_upd, P_pred)
+        x, P = _kalman_update(x_pred, P_pred, zs[:, :, b], W[..., b], measured[..., b], H if H.ndim == 2 else H[:, :, b], R)
         xf[:, :, b], Pf[:, :, b] = x, P
+    return (*_rts(xf, Pf, xp, Pp, C), xf, Pf)
+
+
+def _kalman_update(
+    x_pred: np.ndarray, P_pred: np.ndarray, z: np.ndarray, W: np.ndarray, upd: np.ndarray, H: np.ndarray, R: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The Kalman update with the measurement noise R / W of the slots where ``upd``; the others keep the prediction.
+
+    ``x_pred (M, L, n)``, ``P_pred (M, L, n, n)``, ``z (M, L, m)``, ``W`` and
+    ``upd (M, L)``, ``H (m, n)`` or ``(M, L, m, n)``.
+    """
+    # R̃ = R / W without dividing (W may be tiny): S' = W H P⁻ H' + R = W S, gain K = W P⁻ H' S'⁻¹
+    Wb = np.where(upd, W, 0.0)[..., None, None]
+    PHt = P_pred @ np.swapaxes(H, -1, -2)
+    S = Wb * (H @ PHt) + R
+    KtW = np.linalg.solve(S, np.swapaxes(PHt, -1, -2))  # S'⁻¹ H P⁻, i.e. Kᵀ / W
+    nu = z - np.einsum("...ij,...j->...i", H, x_pred)
+    x_upd = x_pred + Wb[..., 0] * np.einsum("...ji,...j->...i", KtW, nu)
+    P_upd = P_pred - Wb * (PHt @ KtW)
+    P_upd = 0.5 * (P_upd + np.swapaxes(P_upd, -1, -2))
+    if upd.all():
+        return x_upd, P_upd
+    return np.where(upd[..., None], x_upd, x_pred), np.where(upd[..., None, None], P_upd, P_pred)
+
+
+def _rts(xf: np.ndarray, Pf: np.ndarray, xp: np.ndarray, Pp: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rauch-Tung-Striebel backward pass over axis 2 from the filtered, predicted and cross ``(M, L, B, ...)`` arrays."""
+    B = xf.shape[2]
     xs, Ps = xf.copy(), Pf.copy()
+    if B < 2:
+        return xs, Ps
+    # the gains G_b = C_{b+1} P⁻_{b+1}⁻¹ need only the forward pass: one solve for all steps (LAPACK per matrix, same bits)
+    G = np.swapaxes(np.linalg.solve(Pp[:, :, 1:], np.swapaxes(C[:, :, 1:], -1, -2)), -1, -2)
+    Gt = np.swapaxes(G, -1, -2)
     for b in range(B - 2, -1, -1):
-        G = np.swapaxes(np.linalg.solve(Pp[:, :, b + 1], np.swapaxes(C[:, :, b + 1], -1, -2)), -1, -2)
-        xs[:, :, b] = xf[:, :, b] + np.einsum("...ij,...j->...i", G, xs[:, :, b + 1] - xp[:, :, b + 1])
-        Pn = Pf[:, :, b] + G @ (Ps[:, :, b + 1] - Pp[:, :, b + 1]) @ np.swapaxes(G, -1, -2)
+        Gb = G[:, :, b]
+        xs[:, :, b] = xf[:, :, b] + np.einsum("...ij,...j->...i", Gb, xs[:, :, b + 1] - xp[:, :, b + 1])
+        Pn = Pf[:, :, b] + Gb @ (Ps[:, :, b + 1] - Pp[:, :, b + 1]) @ Gt[:, :, b]
         Ps[:, :, b] = 0.5 * (Pn + np.swapaxes(Pn, -1, -2))
-    return xs, Ps, xf, Pf
+    return xs, Ps
 
 
 def _residuals(model: LinearModel, z: np.ndarray, X: np.ndarray) -> np.ndarray:
