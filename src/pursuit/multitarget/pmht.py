@@ -279,7 +279,8 @@ def em_window(
 
     def estep(r: np.ndarray, X: np.ndarray, log_c: np.ndarray, log_pi: np.ndarray):
         """Weights and the association term of the runs ``r`` (X, log_c, log_pi: those runs' rows)."""
-        zr, dr, ar = zt[r], det[r], active[r]
+        every_run = r.size == M  # the first E-step and any iteration before a run converged: no copies
+        zr, dr, ar = (zt, det, active) if every_run else (zt[r], det[r], active[r])
         res = _residuals(model, zr, X)  # (M, L, B, D, m)
         logN = -0.5 * (quadratic_form(res, Rinv) + R_logdet)
         lt = np.where(dr[:, None] & ar[..., None], log_pi[..., None] + logN, -np.inf)
@@ -459,7 +460,14 @@ def _rts(xf: np.ndarray, Pf: np.ndarray, xp: np.ndarray, Pp: np.ndarray, C: np.n
 def _residuals(model: LinearModel, z: np.ndarray, X: np.ndarray) -> np.ndarray:
     """``(M, L, B, D, m)`` z_r ⊖ h(x) for detections ``z (M, B, D, m)`` and states ``X (M, L, B, n)``."""
     if model.H is not None:
-        return z[:, None] - np.einsum("ij,mlbj->mlbi", model.H, X)[:, :, :, None, :]
+        # one component at a time into a component-major array: a broadcast subtraction whose
+        # innermost axis is the m = 2 components costs about 3x more (returned as a view, last axis m)
+        hx = np.einsum("ij,mlbj->mlbi", model.H, X)
+        M, L, B, m = hx.shape
+        out = np.empty((m, M, L, B, z.shape[2]))
+        for i in range(m):
+            np.subtract(z[:, None, :, :, i], hx[:, :, :, None, i], out=out[i])
+        return np.moveaxis(out, 0, -1)
     hx = np.asarray(model.measurement.h(X, 1), dtype=float)
     return model.measurement.residual(z[:, None], hx[:, :, :, None, :])
 
