@@ -68,7 +68,7 @@ def mode_posteriors(
     ra = r[..., axes]  # (M, L, B, A, 2)
     Sa = S[..., axes[:, :, None], axes[:, None, :]]  # (M, L, B, A, 2, 2)
     ga = np.take_along_axis(model.inputs, np.broadcast_to(axes[None], (B, *axes.shape)), axis=2)  # (B, A, 2)
-    res = ra[..., None, :] - ga[:, :, None, :] * levels[:, None]  # (M, L, B, A, J, 2)
+    res = _level_residuals(ra, ga, levels)  # (M, L, B, A, J, 2)
     Sinv = inv_spd(Sa)  # closed-form 2x2 inverses: a fraction of LAPACK's per-matrix cost
     loge = -0.5 * quadratic_form(res, Sinv[..., None, :, :])  # the log-det is common to all j
     e = np.exp(loge - _max_last(loge)[..., None])
@@ -90,6 +90,19 @@ def mode_posteriors(
         g = alpha[:, :, b] * beta
         gamma[:, :, b] = g / _sum_last(g)[..., None]
     return gamma, alpha
+
+
+def _level_residuals(ra: np.ndarray, ga: np.ndarray, levels: np.ndarray) -> np.ndarray:
+    """``(M, L, B, A, J, 2)`` r − g a_j per level, for ``ra (M, L, B, A, 2)``, ``ga (B, A, 2)``, ``levels (J,)``.
+
+    Each of the two components is computed into a component-major array
+    (a view with the components last is returned): a broadcast subtraction
+    with the two components innermost cost ~1.5x more.  The same values.
+    """
+    out = np.empty((ra.shape[-1], *ra.shape[:-1], levels.size))
+    for i in range(ra.shape[-1]):
+        np.subtract(ra[..., i, None], ga[:, :, i, None] * levels, out=out[i])
+    return np.moveaxis(out, 0, -1)
 
 
 def _max_last(x: np.ndarray) -> np.ndarray:
