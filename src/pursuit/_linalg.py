@@ -232,15 +232,16 @@ def solve_spd(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """``A⁻¹ B`` for a stack of symmetric positive-definite ``A (..., n, n)`` and ``B (..., n, k)``, broadcast.
 
     Up to ``n = 4`` by an LDLᵀ factorisation written out over whole arrays
-    (no pivoting, which positive definiteness makes stable).  LAPACK's
-    per-matrix solve costs ~0.4 µs a 4x4 matrix: on 2000 of them with 4
-    right-hand sides this takes half its time, but below a few hundred
-    matrices the ~80 µs of whole-array calls cost more, so it is meant for
-    the large stacks of the IMM smoother's mode pairs.  Reads A's lower triangle.  Where a pivot has
-    lost more than six digits against its diagonal entry (a nearly singular
-    A), or is not positive or NaN, that matrix is solved by LAPACK instead,
-    as are all matrices for ``n > 4``.  Each matrix's result depends on that
-    matrix alone, so the result is batch-invariant.
+    (no pivoting, which positive definiteness makes stable); reads A's lower
+    triangle.  LAPACK's per-matrix solve costs ~0.4 µs a 4x4 matrix: on 2000
+    of them with 4 right-hand sides this takes half its time, but below a few
+    hundred matrices its ~80 µs of whole-array calls cost more, so it is
+    meant for large stacks (the IMM smoother's mode pairs).  Where a pivot
+    has lost more than six digits against its diagonal entry (a nearly
+    singular A), or is not positive or NaN, that matrix is solved by LAPACK
+    instead (which raises on an exactly singular one, as before), as are all
+    matrices for ``n > 4``.  Each matrix's result depends on that matrix
+    alone, so the result is batch-invariant.
     """
     n = A.shape[-1]
     if n > 4:

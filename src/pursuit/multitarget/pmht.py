@@ -498,7 +498,7 @@ def _input_term(inputs: np.ndarray, ubar: np.ndarray) -> np.ndarray | float:
 
     ``inputs (B, A, n)``, ``ubar (M, L, B, A)``.  One whole-array product per
     axis, summed in the order a = 0..A−1 (the einsum ``"ban,mlba->mlbn"``'s
-    generic loop cost ~4x more); the same values as that einsum.
+    generic loop cost ~4x more); the einsum's values on the demo's windows.
     """
     A = inputs.shape[1]
     if A == 0:
