@@ -279,7 +279,8 @@ def em_window(
 
     def estep(r: np.ndarray, X: np.ndarray, log_c: np.ndarray, log_pi: np.ndarray):
         """Weights and the association term of the runs ``r`` (X, log_c, log_pi: those runs' rows)."""
-        zr, dr, ar = zt[r], det[r], active[r]
+        every_run = r.size == M  # the first E-step and any iteration before a run converged: no copies
+        zr, dr, ar = (zt, det, active) if every_run else (zt[r], det[r], active[r])
         res = _residuals(model, zr, X)  # (M, L, B, D, m)
         logN = -0.5 * (quadratic_form(res, Rinv) + R_logdet)
         lt = np.where(dr[:, None] & ar[..., None], log_pi[..., None] + logN, -np.inf)
@@ -332,7 +333,7 @@ def em_window(
                 log_pi[r] = np.where(keep[:, None], log_pi[r], np.where(ar, np.log(pi_t), -np.inf))
         W = wr.sum(axis=3)  # (M', L, B)
         if model.H is not None:
-            zs = np.einsum("mlbd,mbdi->mlbi", wr, zt[r]) / np.where(W > 0, W, 1.0)[..., None]
+            zs = _weighted_sum(wr, zt[r]) / np.where(W > 0, W, 1.0)[..., None]
             H = model.H
         else:  # linearised at the current states: z̃ = H x̄ + Σ_r w (z_r ⊖ h(x̄)) / W
             Xr = X[r]
@@ -398,47 +399,114 @@ def _smooth(
     xp = np.empty((M, L, B, n))
     Pp = np.empty((M, L, B, n, n))
     C = np.empty((M, L, B, n, n))
+    U = _input_term(model.inputs, ubar)
+    # contiguous transposes: a matmul with a transposed view as its right operand costs ~2.5x more (same bits)
+    Ft = np.ascontiguousarray(np.swapaxes(model.F, -1, -2))
+    Ht = np.ascontiguousarray(np.swapaxes(H, -1, -2))
     for b in range(B):
         F = model.F[b]
         Q = model.Q[b] if Qs is None else Qs[:, :, b]
         step = active[..., b]  # before its first step a track holds its prior (the smoother gain is then I-like)
-        u = np.einsum("ma,...m->...a", model.inputs[b], ubar[:, :, b]) if model.inputs.shape[1] else 0.0
-        x_pred = np.einsum("ij,...j->...i", F, x) + u
-        PFt = P @ F.T
+        x_pred = np.einsum("ij,...j->...i", F, x) + (U if np.isscalar(U) else U[:, :, b])
+        PFt = P @ Ft[b]
         P_pred = F @ PFt + Q
-        x_pred = np.where(step[..., None], x_pred, x)
-        P_pred = np.where(step[..., None, None], P_pred, P)
-        cross = np.where(step[..., None, None], PFt, P)
+        cross = PFt
+        if not step.all():  # the selects are the identity on a step where every slot is active
+            x_pred = np.where(step[..., None], x_pred, x)
+            P_pred = np.where(step[..., None, None], P_pred, P)
+            cross = np.where(step[..., None, None], PFt, P)
         xp[:, :, b], Pp[:, :, b], C[:, :, b] = x_pred, P_pred, cross
-        upd = measured[..., b]
-        # R̃ = R / W without dividing (W may be tiny): S' = W H P⁻ H' + R = W S, gain K = W P⁻ H' S'⁻¹
-        Wb = np.where(upd, W[..., b], 0.0)[..., None, None]
-        Hb = H if H.ndim == 2 else H[:, :, b]
-        PHt = P_pred @ np.swapaxes(Hb, -1, -2)
-        S = Wb * (Hb @ PHt) + R
-        KtW = np.linalg.solve(S, np.swapaxes(PHt, -1, -2))  # S'⁻¹ H P⁻, i.e. Kᵀ / W
-        nu = zs[:, :, b] - np.einsum("...ij,...j->...i", Hb, x_pred)
-        x_upd = x_pred + Wb[..., 0] * np.einsum("...ji,...j->...i", KtW, nu)
-        P_upd = P_pred - Wb * (PHt @ KtW)
-        P_upd = 0.5 * (P_upd + np.swapaxes(P_upd, -1, -2))
-        x = np.where(upd[..., None], x_upd, x_pred)
-        P = np.where(upd[..., None, None], P_upd, P_pred)
+        Hb, Htb = (H, Ht) if H.ndim == 2 else (H[:, :, b], Ht[:, :, b])
+        x, P = _kalman_update(x_pred, P_pred, zs[:, :, b], W[..., b], measured[..., b], Hb, Htb, R)
         xf[:, :, b], Pf[:, :, b] = x, P
+    return (*_rts(xf, Pf, xp, Pp, C), xf, Pf)
+
+
+def _kalman_update(
+    x_pred: np.ndarray,
+    P_pred: np.ndarray,
+    z: np.ndarray,
+    W: np.ndarray,
+    upd: np.ndarray,
+    H: np.ndarray,
+    Ht: np.ndarray,
+    R: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The Kalman update with the measurement noise R / W of the slots where ``upd``; the others keep the prediction.
+
+    ``x_pred (M, L, n)``, ``P_pred (M, L, n, n)``, ``z (M, L, m)``, ``W`` and
+    ``upd (M, L)``, ``H (m, n)`` or ``(M, L, m, n)`` and ``Ht``, its transpose (contiguous).
+    """
+    # R̃ = R / W without dividing (W may be tiny): S' = W H P⁻ H' + R = W S, gain K = W P⁻ H' S'⁻¹
+    Wb = np.where(upd, W, 0.0)[..., None, None]
+    PHt = P_pred @ Ht
+    S = Wb * (H @ PHt) + R
+    KtW = np.linalg.solve(S, np.swapaxes(PHt, -1, -2))  # S'⁻¹ H P⁻, i.e. Kᵀ / W
+    nu = z - np.einsum("...ij,...j->...i", H, x_pred)
+    x_upd = x_pred + Wb[..., 0] * np.einsum("...ji,...j->...i", KtW, nu)
+    P_upd = P_pred - Wb * (PHt @ KtW)
+    P_upd = 0.5 * (P_upd + np.swapaxes(P_upd, -1, -2))
+    if upd.all():
+        return x_upd, P_upd
+    return np.where(upd[..., None], x_upd, x_pred), np.where(upd[..., None, None], P_upd, P_pred)
+
+
+def _rts(xf: np.ndarray, Pf: np.ndarray, xp: np.ndarray, Pp: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rauch-Tung-Striebel backward pass over axis 2 from the filtered, predicted and cross ``(M, L, B, ...)`` arrays."""
+    B = xf.shape[2]
     xs, Ps = xf.copy(), Pf.copy()
+    if B < 2:
+        return xs, Ps
+    # the gains G_b = C_{b+1} P⁻_{b+1}⁻¹ need only the forward pass: one solve for all steps (LAPACK per matrix, same bits)
+    G = np.swapaxes(np.linalg.solve(Pp[:, :, 1:], np.swapaxes(C[:, :, 1:], -1, -2)), -1, -2)
+    Gt = np.swapaxes(G, -1, -2)
     for b in range(B - 2, -1, -1):
-        G = np.swapaxes(np.linalg.solve(Pp[:, :, b + 1], np.swapaxes(C[:, :, b + 1], -1, -2)), -1, -2)
-        xs[:, :, b] = xf[:, :, b] + np.einsum("...ij,...j->...i", G, xs[:, :, b + 1] - xp[:, :, b + 1])
-        Pn = Pf[:, :, b] + G @ (Ps[:, :, b + 1] - Pp[:, :, b + 1]) @ np.swapaxes(G, -1, -2)
+        Gb = G[:, :, b]
+        xs[:, :, b] = xf[:, :, b] + np.einsum("...ij,...j->...i", Gb, xs[:, :, b + 1] - xp[:, :, b + 1])
+        Pn = Pf[:, :, b] + Gb @ (Ps[:, :, b + 1] - Pp[:, :, b + 1]) @ Gt[:, :, b]
         Ps[:, :, b] = 0.5 * (Pn + np.swapaxes(Pn, -1, -2))
-    return xs, Ps, xf, Pf
+    return xs, Ps
 
 
 def _residuals(model: LinearModel, z: np.ndarray, X: np.ndarray) -> np.ndarray:
     """``(M, L, B, D, m)`` z_r ⊖ h(x) for detections ``z (M, B, D, m)`` and states ``X (M, L, B, n)``."""
     if model.H is not None:
-        return z[:, None] - np.einsum("ij,mlbj->mlbi", model.H, X)[:, :, :, None, :]
+        # one component at a time into a component-major array: a broadcast subtraction whose
+        # innermost axis is the m = 2 components costs about 3x more (returned as a view, last axis m)
+        hx = np.einsum("ij,mlbj->mlbi", model.H, X)
+        M, L, B, m = hx.shape
+        out = np.empty((m, M, L, B, z.shape[2]))
+        for i in range(m):
+            np.subtract(z[:, None, :, :, i], hx[:, :, :, None, i], out=out[i])
+        return np.moveaxis(out, 0, -1)
     hx = np.asarray(model.measurement.h(X, 1), dtype=float)
     return model.measurement.residual(z[:, None], hx[:, :, :, None, :])
+
+
+def _weighted_sum(w: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """``(M, L, B, m)`` Σ_r w_tr z_r for weights ``w (M, L, B, D)`` and detections ``z (M, B, D, m)``.
+
+    One (L × D) @ (D × m) product per run and scan (``np.matmul`` on the
+    stack, one fixed-size product per matrix, so batch-invariant); the einsum
+    ``"mlbd,mbdi->mlbi"`` took a generic loop that cost ~7x more.
+    """
+    return np.swapaxes(np.swapaxes(w, 1, 2) @ z, 1, 2)
+
+
+def _input_term(inputs: np.ndarray, ubar: np.ndarray) -> np.ndarray | float:
+    """``(M, L, B, n)`` Σ_a ū_a g_a, the maneuver input's state change (0.0 without input axes).
+
+    ``inputs (B, A, n)``, ``ubar (M, L, B, A)``.  One whole-array product per
+    axis, summed in the order a = 0..A−1 (the einsum ``"ban,mlba->mlbn"``'s
+    generic loop cost ~4x more); the einsum's values on the demo's windows.
+    """
+    A = inputs.shape[1]
+    if A == 0:
+        return 0.0
+    out = ubar[..., 0, None] * inputs[:, 0]
+    for a in range(1, A):
+        out += ubar[..., a, None] * inputs[:, a]
+    return out
 
 
 def _gather_step(a: np.ndarray, index: np.ndarray) -> np.ndarray:
@@ -458,7 +526,7 @@ def _process_loglik(
 ) -> np.ndarray:
     """``(M,)`` Σ_m log p(x_m | ū): the prior-predictive term at each track's first step plus the Q terms after it."""
     B = X.shape[2]
-    u = np.einsum("ban,mlba->mlbn", model.inputs, ubar) if model.inputs.shape[1] else 0.0
+    u = _input_term(model.inputs, ubar)
     prev = np.concatenate([prior_mean[:, :, None], X[:, :, :-1]], axis=2)
     r = X - (np.einsum("bij,mlbj->mlbi", model.F, prev) + u)
     q_term = -0.5 * (quadratic_form(r, model.Q_pinv) + model.Q_logpdet)
