@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from pursuit._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, numerical_jacobian, psd_factor, quad, quadratic_form, solve_spd
+from pursuit._linalg import cholesky_psd, inv_spd, is_shared, logdet_spd, numerical_jacobian, psd_factor, quad, quadratic_form
 
 
 @given(st.integers(1, 5), st.integers(0, 2**31 - 1))
@@ -275,35 +275,3 @@ def test_inv_spd_gives_nan_for_an_overflowed_matrix_and_inverts_the_rest():
         assert np.isnan(out[1]).all()
         np.testing.assert_allclose(out[0], np.eye(m) / 2.0)
         np.testing.assert_allclose(out[2], np.eye(m) / 2.0)
-
-
-@given(st.integers(1, 6), st.integers(0, 2**31 - 1))
-def test_solve_spd_matches_lapack(n, seed):
-    """The LDLᵀ solve (n ≤ 4; LAPACK above) against np.linalg.solve, stacks broadcast against each other."""
-    r = np.random.default_rng(seed)
-    A = r.standard_normal((3, 1, n, n))
-    S = A @ np.swapaxes(A, -1, -2) + 0.5 * np.eye(n)
-    B = r.standard_normal((4, n, 2))
-    np.testing.assert_allclose(solve_spd(S, B), np.linalg.solve(S, B), rtol=1e-9, atol=1e-9)
-
-
-def test_solve_spd_is_batch_invariant_bitwise(rng):
-    A = rng.standard_normal((50, 4, 4))
-    S = A @ np.swapaxes(A, -1, -2) + np.eye(4)
-    B = rng.standard_normal((50, 4, 3))
-    full = solve_spd(S, B)
-    for i in range(0, 50, 7):
-        np.testing.assert_array_equal(solve_spd(S[i : i + 7], B[i : i + 7]), full[i : i + 7])
-
-
-def test_solve_spd_hands_nearly_singular_and_nan_matrices_to_lapack():
-    S = np.tile(np.eye(4), (3, 1, 1))
-    S[1, :2, :2] = [[1.0, 1.0 - 1e-9], [1.0 - 1e-9, 1.0]]  # a pivot ~2e-9 of its diagonal: LAPACK's answer
-    S[2, 0, 0] = np.nan
-    B = np.ones((3, 4, 2))
-    got = solve_spd(S, B)
-    np.testing.assert_array_equal(got[1:], np.linalg.solve(S[1:], B[1:]))
-    np.testing.assert_allclose(got[0], B[0])
-    S[1] = 0.0  # singular: LAPACK raises, as before
-    with pytest.raises(np.linalg.LinAlgError):
-        solve_spd(S, B)

@@ -28,7 +28,6 @@ __all__ = [
     "quadratic_form",
     "inv_spd",
     "logdet_spd",
-    "solve_spd",
     "cholesky_psd",
     "psd_factor",
     "numerical_jacobian",
@@ -226,66 +225,6 @@ def logdet_spd(S: np.ndarray) -> np.ndarray:
         sign, logdet = np.linalg.slogdet(S[bad])
         out[bad] = np.where(sign > 0, logdet, np.nan)
     return out
-
-
-def solve_spd(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """``A⁻¹ B`` for a stack of symmetric positive-definite ``A (..., n, n)`` and ``B (..., n, k)``, broadcast.
-
-    Up to ``n = 4`` by an LDLᵀ factorisation written out over whole arrays
-    (no pivoting, which positive definiteness makes stable); reads A's lower
-    triangle.  LAPACK's per-matrix solve costs ~0.4 µs a 4x4 matrix: on 2000
-    of them with 4 right-hand sides this takes half its time, but below a few
-    hundred matrices its ~80 µs of whole-array calls cost more, so it is
-    meant for large stacks (the IMM smoother's mode pairs).  Where a pivot
-    has lost more than six digits against its diagonal entry (a nearly
-    singular A), or is not positive or NaN, that matrix is solved by LAPACK
-    instead (which raises on an exactly singular one, as before), as are all
-    matrices for ``n > 4``.  Each matrix's result depends on that matrix
-    alone, so the result is batch-invariant.
-    """
-    n = A.shape[-1]
-    if n > 4:
-        return np.linalg.solve(A, B)
-    A, B = _broadcast_stacks(A, B)
-    # LDLᵀ: L unit lower triangular (L[i][j], i > j), d the pivots
-    L = [[None] * n for _ in range(n)]
-    d = []
-    bad = np.zeros(A.shape[:-2], dtype=bool)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for j in range(n):
-            LD = [L[j][k] * d[k] for k in range(j)]  # L_jk d_k
-            dj = A[..., j, j] - _sum_terms([LD[k] * L[j][k] for k in range(j)])
-            bad |= ~(dj > _CLOSED_FORM_MIN_RATIO * A[..., j, j])
-            d.append(dj)
-            for i in range(j + 1, n):
-                L[i][j] = (A[..., i, j] - _sum_terms([L[i][k] * LD[k] for k in range(j)])) / dj
-        # forward (L y = B), scale (z = y / d), back (Lᵀ x = z), one row of k right-hand sides at a time
-        y: list[np.ndarray] = []
-        for i in range(n):
-            y.append(B[..., i, :] - _sum_terms([L[i][k][..., None] * y[k] for k in range(i)]))
-        x: list[np.ndarray] = [None] * n  # type: ignore[list-item]
-        for i in range(n - 1, -1, -1):
-            x[i] = y[i] / d[i][..., None] - _sum_terms([L[k][i][..., None] * x[k] for k in range(i + 1, n)])
-    out = np.stack(x, axis=-2)
-    if np.any(bad):
-        out[bad] = np.linalg.solve(A[bad], B[bad])
-    return out
-
-
-def _sum_terms(terms: list[np.ndarray]) -> np.ndarray | float:
-    """``terms[0] + terms[1] + …`` left to right; 0.0 for none."""
-    if not terms:
-        return 0.0
-    total = terms[0]
-    for t in terms[1:]:
-        total = total + t
-    return total
-
-
-def _broadcast_stacks(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A and B broadcast over their leading (stack) axes, keeping their own last two."""
-    lead = np.broadcast_shapes(A.shape[:-2], B.shape[:-2])
-    return np.broadcast_to(A, (*lead, *A.shape[-2:])), np.broadcast_to(B, (*lead, *B.shape[-2:]))
 
 
 def cholesky_psd(P: np.ndarray, jitter: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:

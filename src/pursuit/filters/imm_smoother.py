@@ -47,7 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._linalg import solve_spd, symmetrize
+from .._linalg import symmetrize
 
 __all__ = ["IMMSmoothed", "imm_smooth"]
 
@@ -239,7 +239,7 @@ def imm_smooth(
         PFt = Pk[..., :, None, :, :] @ Ft[k + 1]  # (*b, i, j, n, n)
         P_pred = Fn @ PFt + Qn
         x_pred = np.einsum("jab,...ib->...ija", Fn, xk)
-        G = np.swapaxes(solve_spd(P_pred, np.swapaxes(PFt, -1, -2)), -1, -2)
+        G = np.swapaxes(np.linalg.solve(P_pred, np.swapaxes(PFt, -1, -2)), -1, -2)
         x_ij = xk[..., :, None, :] + np.einsum("...ab,...b->...a", G, xs_j[..., None, :, :] - x_pred)
         P_ij = Pk[..., :, None, :, :] + G @ (Ps_j[..., None, :, :, :] - P_pred) @ np.swapaxes(G, -1, -2)
         x_i, P_i = _moments(back, x_ij, P_ij)
