@@ -119,11 +119,33 @@ def mh_layout(N: int, r: int) -> tuple[int, int, int, int, int]:
 
 
 def _x_of(m: np.ndarray, xi: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """m + G ξ summed column by column (the compiled kernel's order)."""
+    """m + G ξ summed column by column (the compiled kernel's order).
+
+    Component by component: X_j += G_jc ξ_c over whole ``(*b, M)`` planes is
+    about three times faster than broadcasting the column ``G[:, c]`` (a
+    NumPy inner loop n long per particle), with the same sums in the same order.
+    """
     X = np.array(m, dtype=float, copy=True)
-    for c in range(G.shape[1]):
-        X += G[:, c] * xi[..., c : c + 1]
+    term = np.empty(xi.shape[:-1])
+    for j in range(G.shape[0]):
+        Xj = X[..., j]
+        for c in range(G.shape[1]):
+            Xj += np.multiply(xi[..., c], G[j, c], out=term)
     return X
+
+
+def _rows(a: np.ndarray) -> np.ndarray:
+    """``a (..., n)`` viewed as ``(...)`` opaque n-number rows (the last axis must be contiguous)."""
+    return a.view(np.dtype((np.void, a.shape[-1] * a.itemsize)))[..., 0]
+
+
+def _select_rows(dst: np.ndarray, src: np.ndarray, ok: np.ndarray) -> None:
+    """``dst[..., i, :] = src[..., i, :]`` where ``ok[..., i]``, the rows copied bitwise.
+
+    A masked copy of whole rows: about five times faster than ``np.where`` on
+    ``(*b, M, n)`` with the mask broadcast along the short last axis.
+    """
+    np.copyto(_rows(dst), _rows(src), where=ok)
 
 
 def _log_prior(xi: np.ndarray) -> np.ndarray:
@@ -210,9 +232,8 @@ def mh_moves(
         d = LTn - LT[..., sl]
         # log u < Δ, with the bound log u ≤ u − 1 tried first as the compiled kernel does (module docstring)
         ok = (u - 1.0 < d) | (np.log(u) < d)
-        okx = ok[..., None]
-        xi[..., sl, :] = np.where(okx, prop, xi[..., sl, :])
-        X[..., sl, :] = np.where(okx, Xn, X[..., sl, :])
+        _select_rows(xi[..., sl, :], prop, ok)
+        _select_rows(X[..., sl, :], Xn, ok)
         F[..., sl] = np.where(ok, Fn, F[..., sl])
         LT[..., sl] = np.where(ok, LTn, LT[..., sl])
         return ok.sum(axis=-1)
