@@ -184,6 +184,7 @@ def mh_moves(
     G: np.ndarray,
     fitness: Callable[[np.ndarray], np.ndarray],
     rng: Any,
+    F: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
     """Run the MH cuckoo moves on resampled particles (module docstring).
 
@@ -201,6 +202,9 @@ def mh_moves(
         ``fitness(C) -> (*b, M)`` measurement log-likelihood of ``C (*b, M, n)``.
     rng
         Streams (one per leading batch index with RunStreams).
+    F
+        ``(*b, N)`` fitness of ``X`` when the caller has it (None: computed
+        here); it must be what ``fitness(X)`` returns, bit for bit.
 
     Returns
     -------
@@ -211,7 +215,7 @@ def mh_moves(
     *batch, N, r = xi.shape
     X = np.array(X, dtype=float, copy=True)
     xi = np.array(xi, dtype=float, copy=True)
-    F = np.asarray(fitness(X), dtype=float).copy()
+    F = np.array(np.broadcast_to(fitness(X) if F is None else F, xi.shape[:-1]), dtype=float, copy=True)
     accepted = np.zeros(batch, dtype=np.int64)
     if n_iter == 0:
         return X, xi, F, accepted, 0
