@@ -167,12 +167,15 @@ def _mantegna(u: np.ndarray, v: np.ndarray, beta: float, sigma_u: float) -> np.n
     """Lévy steps (u σ_u) / |v|^(1/β), the compiled kernel's formula."""
     a = np.abs(v)
     if beta == 1.5:
-        a = np.cbrt(a * a)
+        np.multiply(a, a, out=a)
+        np.cbrt(a, out=a)
     elif beta == 2.0:
-        a = np.sqrt(a)
+        np.sqrt(a, out=a)
     elif beta != 1.0:
-        a = a ** (1.0 / beta)
-    return (u * sigma_u) / a
+        a = a ** (1.0 / beta)  # the operator: NumPy special-cases some exponents
+    L = np.multiply(u, sigma_u)
+    L /= a
+    return L
 
 
 def mh_moves(
@@ -263,7 +266,8 @@ def mh_moves(
             if size_h == 0:
                 continue
             L = _mantegna(normals[..., t, 0, sl, :], normals[..., t, 1, sl, :], search.beta, sigma_u)
-            prop = xi[..., sl, :] + L * alphas[j]
+            L *= alphas[j]
+            prop = np.add(xi[..., sl, :], L, out=L)  # ξ + α L, in L's memory
             accepted += metropolis(sl, prop, U[..., u_levy : u_levy + N][..., sl])
             proposals += size_h
         # discovery, A with partners from B, then B with partners from A
@@ -280,9 +284,10 @@ def mh_moves(
             x2 = gather(xi, o0 + p2)
             s = U[..., : N * r].reshape(*batch, N, r)[..., sl, :]
             K = s > pa if yang else s < pa
-            d = (x1 - x2) * K
+            d = np.subtract(x1, x2, out=x1)  # (ξ_p1 − ξ_p2) ⊙ K γ, in x1's memory
+            d *= K
             d *= U[..., u_gamma + j][..., None, None]
-            prop = xi[..., sl, :] + d
+            prop = np.add(xi[..., sl, :], d, out=d)
             accepted += metropolis(sl, prop, U[..., u_disc : u_disc + N][..., sl])
             proposals += size_h
     return X, xi, F, accepted, proposals
