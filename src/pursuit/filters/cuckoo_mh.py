@@ -80,6 +80,7 @@ the discovery accept uniforms ``(N,)``, then γ_A and γ_B.
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Any, Callable
 
 import numpy as np
@@ -136,7 +137,15 @@ def _x_of(m: np.ndarray, xi: np.ndarray, G: np.ndarray) -> np.ndarray:
 
 def _rows(a: np.ndarray) -> np.ndarray:
     """``a (..., n)`` viewed as ``(...)`` opaque n-number rows (the last axis must be contiguous)."""
-    return a.view(np.dtype((np.void, a.shape[-1] * a.itemsize)))[..., 0]
+    if a.shape[-1] == 1:  # one number per row (UNGM): no new dtype needed
+        return a[..., 0]
+    return a.view(_row_dtype(a.shape[-1] * a.itemsize))[..., 0]
+
+
+@lru_cache(maxsize=None)
+def _row_dtype(nbytes: int) -> np.dtype:
+    """An opaque dtype of ``nbytes`` bytes (cached: building one costs more than the view)."""
+    return np.dtype((np.void, nbytes))
 
 
 def _select_rows(dst: np.ndarray, src: np.ndarray, ok: np.ndarray) -> None:
