@@ -523,9 +523,12 @@ class CuckooParticleFilter(ParticleFilterBase):
         e_after = np.where(need[..., None], 1.0, weighed.e)
         s_after = np.where(need, float(N), weighed.s)
         info = weighed.info
-        (X, m, xi), logw, uniform = self.resample([X, m, xi], weighed, need, rng, work)
+        # the weighing's log-likelihoods, resampled with the particles, are the fitness of the resampled
+        # particles (computed particle by particle, so the same bits): the moves start from them
+        ll = np.broadcast_to(weighed.ll, weighed.e.shape)
+        (X, m, xi, ll), logw, uniform = self.resample([X, m, xi, ll], weighed, need, rng, work)
         X, xi, F, accepted, proposals = mh_moves(
-            self.search, mantegna_sigma(self.search.beta), X, m, xi, G, lambda C: self._fitness(C, z, k), rng
+            self.search, mantegna_sigma(self.search.beta), X, m, xi, G, lambda C: self._fitness(C, z, k), rng, F=ll
         )
         if self.estimate == "mean":
             mean, cov = weighted_moments(X, e_after, s_after, work)

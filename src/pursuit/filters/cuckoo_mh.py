@@ -80,6 +80,7 @@ the discovery accept uniforms ``(N,)``, then γ_A and γ_B.
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Any, Callable
 
 import numpy as np
@@ -119,11 +120,42 @@ def mh_layout(N: int, r: int) -> tuple[int, int, int, int, int]:
 
 
 def _x_of(m: np.ndarray, xi: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """m + G ξ summed column by column (the compiled kernel's order)."""
+    """m + G ξ summed column by column (the compiled kernel's order).
+
+    Component by component: X_j += G_jc ξ_c over whole ``(*b, M)`` planes is
+    about three times faster than broadcasting the column ``G[:, c]`` (a
+    NumPy inner loop n long per particle), with the same sums in the same order.
+    """
     X = np.array(m, dtype=float, copy=True)
-    for c in range(G.shape[1]):
-        X += G[:, c] * xi[..., c : c + 1]
+    term = np.empty(xi.shape[:-1])
+    for j in range(G.shape[0]):
+        Xj = X[..., j]
+        for c in range(G.shape[1]):
+            Xj += np.multiply(xi[..., c], G[j, c], out=term)
     return X
+
+
+def _rows(a: np.ndarray) -> np.ndarray:
+    """``a (..., n)`` viewed as ``(...)`` opaque n-number rows (the last axis must be contiguous)."""
+    return a.view(_row_dtype(a.shape[-1] * a.itemsize))[..., 0]
+
+
+@lru_cache(maxsize=None)
+def _row_dtype(nbytes: int) -> np.dtype:
+    """An opaque dtype of ``nbytes`` bytes (cached: building one costs more than the view)."""
+    return np.dtype((np.void, nbytes))
+
+
+def _select_rows(dst: np.ndarray, src: np.ndarray, ok: np.ndarray) -> None:
+    """``dst[..., i, :] = src[..., i, :]`` where ``ok[..., i]``, the rows copied bitwise.
+
+    A masked copy of whole rows: about five times faster than ``np.where`` on
+    ``(*b, M, n)`` with the mask broadcast along the short last axis.
+    """
+    if dst.shape[-1] == 1:  # one number per row (UNGM): there np.where is the cheaper one
+        dst[...] = np.where(ok[..., None], src, dst)
+        return
+    np.copyto(_rows(dst), _rows(src), where=ok)
 
 
 def _log_prior(xi: np.ndarray) -> np.ndarray:
@@ -145,12 +177,15 @@ def _mantegna(u: np.ndarray, v: np.ndarray, beta: float, sigma_u: float) -> np.n
     """Lévy steps (u σ_u) / |v|^(1/β), the compiled kernel's formula."""
     a = np.abs(v)
     if beta == 1.5:
-        a = np.cbrt(a * a)
+        np.multiply(a, a, out=a)
+        np.cbrt(a, out=a)
     elif beta == 2.0:
-        a = np.sqrt(a)
+        np.sqrt(a, out=a)
     elif beta != 1.0:
-        a = a ** (1.0 / beta)
-    return (u * sigma_u) / a
+        a = a ** (1.0 / beta)  # the operator: NumPy special-cases some exponents
+    L = np.multiply(u, sigma_u)
+    L /= a
+    return L
 
 
 def mh_moves(
@@ -162,6 +197,7 @@ def mh_moves(
     G: np.ndarray,
     fitness: Callable[[np.ndarray], np.ndarray],
     rng: Any,
+    F: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
     """Run the MH cuckoo moves on resampled particles (module docstring).
 
@@ -179,6 +215,9 @@ def mh_moves(
         ``fitness(C) -> (*b, M)`` measurement log-likelihood of ``C (*b, M, n)``.
     rng
         Streams (one per leading batch index with RunStreams).
+    F
+        ``(*b, N)`` fitness of ``X`` when the caller has it (None: computed
+        here); it must be what ``fitness(X)`` returns, bit for bit.
 
     Returns
     -------
@@ -189,7 +228,7 @@ def mh_moves(
     *batch, N, r = xi.shape
     X = np.array(X, dtype=float, copy=True)
     xi = np.array(xi, dtype=float, copy=True)
-    F = np.asarray(fitness(X), dtype=float).copy()
+    F = np.array(np.broadcast_to(fitness(X) if F is None else F, xi.shape[:-1]), dtype=float, copy=True)
     accepted = np.zeros(batch, dtype=np.int64)
     if n_iter == 0:
         return X, xi, F, accepted, 0
@@ -210,9 +249,8 @@ def mh_moves(
         d = LTn - LT[..., sl]
         # log u < Δ, with the bound log u ≤ u − 1 tried first as the compiled kernel does (module docstring)
         ok = (u - 1.0 < d) | (np.log(u) < d)
-        okx = ok[..., None]
-        xi[..., sl, :] = np.where(okx, prop, xi[..., sl, :])
-        X[..., sl, :] = np.where(okx, Xn, X[..., sl, :])
+        _select_rows(xi[..., sl, :], prop, ok)
+        _select_rows(X[..., sl, :], Xn, ok)
         F[..., sl] = np.where(ok, Fn, F[..., sl])
         LT[..., sl] = np.where(ok, LTn, LT[..., sl])
         return ok.sum(axis=-1)
@@ -238,7 +276,8 @@ def mh_moves(
             if size_h == 0:
                 continue
             L = _mantegna(normals[..., t, 0, sl, :], normals[..., t, 1, sl, :], search.beta, sigma_u)
-            prop = xi[..., sl, :] + L * alphas[j]
+            L *= alphas[j]
+            prop = np.add(xi[..., sl, :], L, out=L)  # ξ + α L, in L's memory
             accepted += metropolis(sl, prop, U[..., u_levy : u_levy + N][..., sl])
             proposals += size_h
         # discovery, A with partners from B, then B with partners from A
@@ -255,9 +294,10 @@ def mh_moves(
             x2 = gather(xi, o0 + p2)
             s = U[..., : N * r].reshape(*batch, N, r)[..., sl, :]
             K = s > pa if yang else s < pa
-            d = (x1 - x2) * K
+            d = np.subtract(x1, x2, out=x1)  # (ξ_p1 − ξ_p2) ⊙ K γ, in x1's memory
+            d *= K
             d *= U[..., u_gamma + j][..., None, None]
-            prop = xi[..., sl, :] + d
+            prop = np.add(xi[..., sl, :], d, out=d)
             accepted += metropolis(sl, prop, U[..., u_disc : u_disc + N][..., sl])
             proposals += size_h
     return X, xi, F, accepted, proposals

@@ -90,10 +90,12 @@ def counts_to_indices(counts: np.ndarray) -> np.ndarray:
 def gather(values: np.ndarray, idx: np.ndarray) -> np.ndarray:
     """Select particles per row: ``values (*batch, N, ...)``, ``idx (*batch, K)`` -> ``(*batch, K, ...)``.
 
-    Whole rows are copied by one flat take (about twice as fast as
-    ``np.take_along_axis``, which indexes every element); the same values
-    for ``0 ≤ idx < N``, which the callers guarantee (a negative index is
-    not checked here and would read a neighbouring row of the flat array).
+    Whole rows are copied by one flat ``np.take`` along the first axis
+    (about twice as fast as ``np.take_along_axis``, which indexes every
+    element, and about ten times faster than fancy indexing the flat rows
+    when a row holds a few numbers); the same values for ``0 ≤ idx < N``,
+    which the callers guarantee (a negative index is not checked here and
+    would read a neighbouring row of the flat array).
     """
     batch = idx.shape[:-1]
     N = values.shape[len(batch)]
@@ -101,7 +103,7 @@ def gather(values: np.ndarray, idx: np.ndarray) -> np.ndarray:
     tail = values.shape[len(batch) + 1 :]
     offsets = (np.arange(B) * N).reshape(*batch, 1) if batch else 0
     flat = values.reshape(B * N, *tail)
-    return flat[(idx + offsets).reshape(-1)].reshape(*batch, idx.shape[-1], *tail)
+    return np.take(flat, (idx + offsets).reshape(-1), axis=0).reshape(*batch, idx.shape[-1], *tail)
 
 
 def systematic_counts(
