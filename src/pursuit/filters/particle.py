@@ -177,7 +177,8 @@ def weighted_moments(
         cov = (np.einsum("...p,...p->...", e, d0) * inv)[..., None, None]
     else:
         de = np.multiply(d, e[..., None], out=scratch(work, "moments.de", X.shape))
-        cov = symmetrize(np.einsum("...pi,...pj->...ij", de, d) * inv[..., None, None])
+        # one GEMM per run (batch-invariant); the einsum "...pi,...pj->...ij" cost ~20x more on (100, 200, 4)
+        cov = symmetrize((np.swapaxes(de, -1, -2) @ d) * inv[..., None, None])
     return mean, cov
 
 
