@@ -193,6 +193,37 @@ def test_noise_space_propagation_is_the_models_sample_bitwise(motion, batched):
     np.testing.assert_allclose(G @ G.T, motion.cov(5), rtol=1e-12, atol=1e-15)
 
 
+@pytest.mark.parametrize("layout", ["fortran", "transposed", "broadcast m"])
+def test_mh_moves_give_the_same_bits_whatever_the_particles_memory_layout(layout):
+    """The accepted rows are copied whole through a row view where the rows are contiguous, else by np.where:
+    a caller's Fortran-ordered, transposed or broadcast arrays give the C-ordered arrays' bits."""
+    from pursuit.filters.cuckoo_mh import mh_moves
+
+    motion = ConstantVelocity(ndim=2, q=0.3)
+    g = np.random.default_rng(11)
+    X0 = g.standard_normal((3, 40, 4)) * 3
+    X, m, xi, G = propagate_in_noise_space(motion, X0, 1, None, np.random.default_rng(2))
+    if layout == "broadcast m":
+        m = np.broadcast_to(m[:1], m.shape)
+        X = m + np.einsum("ij,...j->...i", G, xi)
+
+    def fitness(C):
+        return -0.5 * np.sum((C[..., [0, 2]] - 1.0) ** 2, axis=-1)
+
+    search = CuckooSearch(n_iter=3)
+    want = mh_moves(search, mantegna_sigma(search.beta), np.ascontiguousarray(X), np.ascontiguousarray(m),
+                    np.ascontiguousarray(xi), G, fitness, np.random.default_rng(5))
+    if layout == "fortran":
+        X, m, xi = np.asfortranarray(X), np.asfortranarray(m), np.asfortranarray(xi)
+    elif layout == "transposed":
+        X, m, xi = (np.ascontiguousarray(np.moveaxis(a, -1, 0)) for a in (X, m, xi))
+        X, m, xi = (np.moveaxis(a, 0, -1) for a in (X, m, xi))
+    got = mh_moves(search, mantegna_sigma(search.beta), X, m, xi, G, fitness, np.random.default_rng(5))
+    for a, b in zip(got[:4], want[:4]):
+        assert np.array_equal(a, b)
+    assert got[4] == want[4] and want[3].sum() > 0
+
+
 def _bootstrap_and_mh(motion, meas, zs, prior, backend, resampler):
     pf = pu.BootstrapParticleFilter(motion, meas, particles=200, resampler=resampler, backend=backend)
     mh = ICSPF(motion, meas, particles=200, resampler=resampler, estimate="weighted", search=CuckooSearch(n_iter=0), backend=backend)

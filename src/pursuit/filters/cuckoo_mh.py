@@ -152,10 +152,17 @@ def _select_rows(dst: np.ndarray, src: np.ndarray, ok: np.ndarray) -> None:
     A masked copy of whole rows: about five times faster than ``np.where`` on
     ``(*b, M, n)`` with the mask broadcast along the short last axis.
     """
-    if dst.shape[-1] == 1:  # one number per row (UNGM): there np.where is the cheaper one
+    if dst.shape[-1] == 1 or not (_rows_viewable(dst) and _rows_viewable(src)) or src.dtype != dst.dtype:
+        # one number per row (UNGM), where np.where is the cheaper one, or rows that are not contiguous
+        # (a caller's Fortran-ordered or transposed particles, copied in their own layout)
         dst[...] = np.where(ok[..., None], src, dst)
         return
     np.copyto(_rows(dst), _rows(src), where=ok)
+
+
+def _rows_viewable(a: np.ndarray) -> bool:
+    """Whether ``a``'s last axis is contiguous, as :func:`_rows`' view needs."""
+    return a.strides[-1] == a.itemsize
 
 
 def _log_prior(xi: np.ndarray) -> np.ndarray:

@@ -634,8 +634,10 @@ class _GaussianFilter(FilterBase):
         For callers that discard the info of a batch of steps (the partial
         UPF's UKF per particle): NIS, log det S and the info arrays are not
         made.  The mean and covariance are :meth:`numpy_step`'s, bit for
-        bit.  ``z`` must already be checked and broadcast to ``(*batch, m)``
-        (NaN: missing), as :meth:`numpy_step` takes it.  None where the step
+        bit (for one run without a batch axis :meth:`step` takes a cheaper
+        path, equal to round-off).  Nothing is checked: ``z`` must already be
+        ``(*batch, m)`` (NaN: missing), as :meth:`numpy_step` takes it, and
+        ``k``, ``dt`` what :meth:`step` accepted.  None where the step
         is more than predict-and-update (a ``gate``, a fading strategy other
         than a constant factor, a subclass with a step of its own): the
         caller then runs :meth:`step`.

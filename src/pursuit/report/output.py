@@ -98,9 +98,9 @@ def save_figure(fig: Any, paths: list[Path], dpi: int = 150) -> None:
     layout it made: the figure's layout engine is taken away, not only
     switched off (matplotlib's placeholder for a switched-off engine still
     asks for the extra draw), and put back afterwards.  The PDFs are the
-    same bytes either way.  Measured with ``benchmarks/_figure_cost.py``:
-    p1-wsn's PDFs took 0.59x the CPU time with the PNG's layout, p4-bearings'
-    0.64x less again without the extra draw.
+    same bytes either way.  Measured with ``benchmarks/_figure_cost.py``
+    (CPU time against a PDF with its own layout): p4-bearings' PDFs 0.66x
+    with the engine switched off, 0.50x removed; p1-ungm's 0.67x and 0.41x.
     """
     if not paths:
         return
