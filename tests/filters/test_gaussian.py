@@ -154,6 +154,21 @@ def test_posterior_is_the_numpy_steps_mean_and_covariance_bit_for_bit(cls, rng):
     assert cls(motion, meas, fading=pu.filters.StrongTracking()).posterior(state, z, 1) is None
 
 
+def test_posterior_leaves_a_compiled_step_to_step():
+    """With a compiled backend a batch of one axis runs compiled, so posterior() declines it; two axes stay NumPy."""
+    pytest.importorskip("numba")
+    motion = ConstantVelocity(ndim=2, dt=1.0, q=0.1, noise="continuous")
+    meas = LinearGaussian.position(4, motion.position_indices, 0.5)
+    filt = pu.filters.UnscentedKalmanFilter(motion, meas, backend="numba")
+    z = np.random.default_rng(3).standard_normal((2, 3, 2))
+    flat = pu.filters.GaussianState(mean=np.zeros((6, 4)), cov=np.broadcast_to(np.eye(4), (6, 4, 4)), k=0)
+    assert filt.posterior(flat, z.reshape(6, 2), 1) is None
+    grid = pu.filters.GaussianState(mean=np.zeros((2, 3, 4)), cov=np.broadcast_to(np.eye(4), (2, 3, 4, 4)), k=0)
+    want, _ = filt.numpy_step(grid, z, 1, None)
+    mean, cov, _ = filt.posterior(grid, z, 1)
+    assert np.array_equal(mean, want.mean) and np.array_equal(cov, want.cov)
+
+
 @st.composite
 def stable_linear_models(draw):
     """Random linear-Gaussian models with a stable (spectral radius < 1.2) transition."""

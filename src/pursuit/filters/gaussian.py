@@ -614,14 +614,11 @@ class _GaussianFilter(FilterBase):
         k, dt
             Step index and time since the previous step (None: the model's own).
         """
-        own = type(self).step is _GaussianFilter.step and type(self).numpy_step is _GaussianFilter.numpy_step
-        if self.gate is not None or type(self.fading) is not Constant or not own:
+        if not self._plain_step():
             return None
         k = int(k)
         dt = time_step(dt, k)
-        pred = self._predict(state.mean, _core(state.cov), k, dt)
-        P_pred = _scale(np.asarray(self.fading.lam, dtype=float), pred.propagated) + pred.Q
-        meas, P_pred = self._measure_factored(pred.mean, P_pred, k)
+        pred, meas, P_pred = self._predict_and_measure(state, k, dt)
         R = np.asarray(self.measurement.cov(k), dtype=float)
         S, S_inv, K, cov = _gain_and_cov(P_pred, meas, R, R, meas.Pzz, meas.Pxz, meas.H, meas.D)
         return UpdateMoments(pred.mean, symmetrize(P_pred), meas.zp, K, S_inv, logdet_spd(S), symmetrize(cov), self.measurement)
@@ -639,20 +636,30 @@ class _GaussianFilter(FilterBase):
         ``(*batch, m)`` (NaN: missing), as :meth:`numpy_step` takes it, and
         ``k``, ``dt`` what :meth:`step` accepted.  None where the step
         is more than predict-and-update (a ``gate``, a fading strategy other
-        than a constant factor, a subclass with a step of its own): the
-        caller then runs :meth:`step`.
+        than a constant factor, a subclass with a step of its own) or where
+        :meth:`step` runs compiled (a compiled backend and at most one batch
+        axis): the caller then runs :meth:`step`.
         """
-        own = type(self).step is _GaussianFilter.step and type(self).numpy_step is _GaussianFilter.numpy_step
-        if self.gate is not None or type(self.fading) is not Constant or not own:
+        if not self._plain_step() or (self._specs is not None and len(state.batch) <= 1):
             return None
-        pred = self._predict(state.mean, _core(state.cov), k, dt)
-        P_pred = _scale(np.asarray(self.fading.lam, dtype=float), pred.propagated) + pred.Q
-        meas, P_pred = self._measure_factored(pred.mean, P_pred, k)
+        pred, meas, P_pred = self._predict_and_measure(state, k, dt)
         mean, cov, _ = _update(pred.mean, P_pred, z, ~np.isnan(z), meas, self.measurement, k, with_info=False)
         batch = state.batch
         if cov.ndim == 2 and batch:
             cov = np.broadcast_to(cov, (*batch, *cov.shape))
         return mean, cov, _any_repaired(batch, pred.repaired, meas.repaired)
+
+    def _plain_step(self) -> bool:
+        """Whether a step is predict-then-update alone: no gate, a constant fading factor, this class's own step."""
+        own = type(self).step is _GaussianFilter.step and type(self).numpy_step is _GaussianFilter.numpy_step
+        return self.gate is None and type(self.fading) is Constant and own
+
+    def _predict_and_measure(self, state: GaussianState, k: int, dt: float | None) -> tuple[_Prediction, _Measured, np.ndarray]:
+        """The prediction with the constant fading factor, the update's moments and P⁻ as they saw it."""
+        pred = self._predict(state.mean, _core(state.cov), k, dt)
+        P_pred = _scale(np.asarray(self.fading.lam, dtype=float), pred.propagated) + pred.Q
+        meas, P_pred = self._measure_factored(pred.mean, P_pred, k)
+        return pred, meas, P_pred
 
     # -- hooks --------------------------------------------------------------
     def _predict(self, x: np.ndarray, P: np.ndarray, k: int, dt: float | None) -> _Prediction:

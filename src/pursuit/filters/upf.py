@@ -311,7 +311,7 @@ class PartialUPF(ParticleFilterBase):
         zu = np.broadcast_to(z[..., None, :], (*batch_u, z.shape[-1]))
         gs = GaussianState(mean=Xu, cov=Pu, k=k - 1, memory=self._ukf.fading.init(batch_u))
         # the posterior alone (z is already checked): the UKF's info would be thrown away
-        moments = self._ukf.posterior(gs, zu, k, dt) if len(batch_u) > 1 or self._ukf._specs is None else None
+        moments = self._ukf.posterior(gs, zu, k, dt)
         if moments is None:
             post, _ = self._ukf.step(gs, zu, k=k, dt=dt)
             post_mean, post_cov = post.mean, post.cov
