@@ -13,8 +13,9 @@ import pursuit as pu
 from pursuit.engine.montecarlo import monte_carlo
 from pursuit.engine.snapshots import particle_snapshots
 from pursuit.filters.particle import BootstrapParticleFilter, weighted_moments
-from pursuit.models import LinearGaussian
+from pursuit.models import LinearGaussian, gaussian_loglik
 from pursuit.rng import run_streams
+from pursuit.scenarios import WSNRange
 from pursuit.scenarios.ungm import UNGM
 
 
@@ -179,6 +180,35 @@ def test_results_do_not_depend_on_the_chunking_bit_for_bit(resampler):
     np.testing.assert_array_equal(fa.covariances, fb.covariances)
     for key in fa.info:
         np.testing.assert_array_equal(fa.info[key], fb.info[key], err_msg=key)
+
+
+@pytest.mark.parametrize("kind", ["pf", "cs-pf"])
+def test_components_no_run_measured_change_no_bit_whatever_the_chunk(kind):
+    """A 16-node WSN whose nodes range within 60 m: the likelihoods leave out the nodes no run of the chunk
+    measured, with the bits of the full width, so a run's results do not depend on which runs share its chunk."""
+    from pursuit.config.build import build_filter
+
+    grid = [[x, y] for y in (5.0, 55.0, 105.0, 155.0) for x in (-40.0, 10.0, 60.0, 110.0)]
+    sc = WSNRange(steps=12, anchors=grid, sensing_radius=60.0, p_detect=0.9)
+    filt = build_filter({"type": kind, "particles": 100}, sc, "filters[0]")
+    whole = monte_carlo(sc, [filt], runs=6, seed=11, chunk_size=6)
+    unmeasured = np.isnan(whole.measurements)  # (steps, runs, nodes)
+    assert unmeasured.all(axis=1).any(axis=-1).all()  # every step, nodes that no run measured: left out
+    assert (unmeasured[:, :1].all(axis=1) != unmeasured.all(axis=1)).any()  # a chunk of one run leaves out more
+    # the narrow likelihoods are the full-width ones, bit for bit
+    X = np.random.default_rng(2).normal([30.0, 1.0, 80.0, 0.5], 20.0, (6, 100, 4))
+    z = whole.measurements[3]
+    valid = ~np.isnan(z)
+    Zp, ll, const = filt._likelihoods(X, z, 3, valid, valid.any(axis=-1))
+    full = gaussian_loglik(z[:, None, :] - sc.measurement.h(X, 3), sc.measurement.cov(3))
+    assert const == 0.0 and np.array_equal(ll, full) and Zp.shape == (6, 100, 16)
+    for chunk in (1, 4):
+        parts = monte_carlo(sc, [filt], runs=6, seed=11, chunk_size=chunk)
+        a, b = whole.filters[filt.name], parts.filters[filt.name]
+        np.testing.assert_array_equal(a.estimates, b.estimates)
+        np.testing.assert_array_equal(a.covariances, b.covariances)
+        for key in a.info:
+            np.testing.assert_array_equal(a.info[key], b.info[key], err_msg=key)
 
 
 def test_ess_threshold_controls_resampling():

@@ -8,6 +8,7 @@ from scipy import stats
 
 from pursuit._linalg import numerical_jacobian
 from pursuit.models import LinearGaussian, RangeBearing, RangeSensors, TimeOfArrival, gaussian_loglik, wrap_angle
+from pursuit.models.measurement import measured_somewhere
 
 ANCHORS = np.array([[0.0, 0.0], [50.0, 0.0], [0.0, 50.0]])
 
@@ -78,11 +79,49 @@ def test_loglik_skips_missing_components_with_diagonal_noise():
 
 
 def _masked_loglik(residual, R):
-    """The diagonal-R log-likelihood written the plain way: missing components masked first, then summed."""
+    """The diagonal-R log-likelihood written the plain way: missing components masked first, then added in order."""
     diag = np.diag(R)
     valid = ~np.isnan(residual)
     r = np.where(valid, residual, 0.0)
-    return -0.5 * (r * r / diag + np.where(valid, np.log(diag) + np.log(2.0 * np.pi), 0.0)).sum(axis=-1)
+    terms = r * r / diag + np.where(valid, np.log(diag) + np.log(2.0 * np.pi), 0.0)
+    total = 0.0 + terms[..., 0]
+    for j in range(1, terms.shape[-1]):  # in order: a row with a missing component
+        total = total + terms[..., j]
+    return -0.5 * np.where(valid.all(axis=-1), terms.sum(axis=-1), total)
+
+
+def test_measured_somewhere_names_the_components_some_run_measured():
+    valid = np.zeros((2, 3, 5), dtype=bool)
+    valid[0, 1, [1, 3]] = True
+    valid[1, 2, 3] = True
+    np.testing.assert_array_equal(measured_somewhere(valid), [1, 3])
+    assert measured_somewhere(np.ones((4, 5), dtype=bool)) is None  # nothing to leave out
+    assert measured_somewhere(np.zeros((4, 5), dtype=bool)) is None  # nothing left: the filters' own rules
+    assert measured_somewhere(np.array([True, False])).tolist() == [0]  # one run, unbatched
+
+
+def test_leaving_out_missing_components_gives_the_bits_of_all_of_them(rng):
+    """Sixteen range nodes of which a few measure: the log-likelihood over the measured columns only, summed
+    in_order, has the bits of the full width with the others NaN (a row with a missing component is added in
+    order, a missing one as +0.0); NumPy's own sum over 16 associates differently."""
+    m = 16
+    R = np.diag(rng.uniform(0.3, 2.0, m))
+    residual = rng.standard_normal((5, 200, m)) * 3.0
+    residual[..., [0, 2, 3, 6, 7, 8, 10, 11, 12, 14]] = np.nan  # never measured
+    residual[1, :, 5] = np.nan  # and some runs miss more
+    residual[4, :, [1, 9]] = np.nan
+    kept = measured_somewhere(~np.isnan(residual[:, 0]))
+    np.testing.assert_array_equal(kept, [1, 4, 5, 9, 13, 15])
+    full = gaussian_loglik(residual, R)
+    narrow = gaussian_loglik(residual[..., kept], R[np.ix_(kept, kept)], in_order=True)
+    assert np.array_equal(full, narrow)
+    assert np.array_equal(full, _masked_loglik(residual, R))
+    # a complete row keeps NumPy's sum (its bits as before), in a call with incomplete rows too
+    mixed = residual.copy()
+    mixed[2] = rng.standard_normal((200, m))
+    got = gaussian_loglik(mixed, R)
+    assert np.array_equal(got, _masked_loglik(mixed, R))
+    assert np.array_equal(got[2], gaussian_loglik(mixed[2], R)) and np.array_equal(got[:2], full[:2])
 
 
 def test_diagonal_loglik_gives_the_bits_of_masking_first(rng):

@@ -68,7 +68,7 @@ import numpy as np
 from .._linalg import inv_spd, quad, symmetrize
 from .._validation import in_range, measurement_for_step, model_dim, positive_int, prior_of_size, time_step
 from ..gaussian import Gaussian
-from ..models.measurement import _GaussianNoise, gaussian_loglik
+from ..models.measurement import _GaussianNoise, gaussian_loglik, measured_somewhere
 from ..rng import RNGLike, RunStreams, as_rng
 from .base import FilterBase, prior_batch
 from .resample import get_resampler, repeat_particles
@@ -401,7 +401,12 @@ class ParticleFilterBase(FilterBase):
         const = 0.0
         if self._stock:
             R = np.asarray(meas.cov(k), dtype=float)
-            r = np.subtract(z[..., None, :], Zp, out=scratch(work, "lik.r", Zp.shape))
+            cols = None if valid.all() else measured_somewhere(valid)
+            if cols is None:
+                r = np.subtract(z[..., None, :], Zp, out=scratch(work, "lik.r", Zp.shape))
+            else:  # components no run measured add exactly nothing (gaussian_loglik): the others only
+                r = z[..., None, cols] - Zp[..., cols]
+                R = R[np.ix_(cols, cols)]
             diag = np.diag(R)
             if valid.all() and np.count_nonzero(R - np.diag(diag)) == 0:
                 # the stock Gaussian log-likelihood without the missing-data bookkeeping
@@ -414,7 +419,8 @@ class ParticleFilterBase(FilterBase):
                     ll = np.einsum("...i,i->...", r, -0.5 / diag)
             else:
                 # rows with nothing measured get a dummy residual; their log-likelihood is set to 0 below
-                ll = gaussian_loglik(r if everywhere else np.where(measured[..., None, None], r, 0.0), R)
+                # in_order with components left out: every row had a missing one at full width
+                ll = gaussian_loglik(r if everywhere else np.where(measured[..., None, None], r, 0.0), R, in_order=cols is not None)
         else:
             zc = z if everywhere else np.where(measured[..., None], z, 0.0)
             ll = np.asarray(meas.loglik(zc[..., None, :], X, k), dtype=float)

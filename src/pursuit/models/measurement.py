@@ -44,11 +44,39 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
     return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
-def gaussian_loglik(residual: np.ndarray, R: np.ndarray) -> np.ndarray:
+def measured_somewhere(valid: np.ndarray) -> np.ndarray | None:
+    """The components some run measured, or None when that is all of them or none.
+
+    ``valid`` is ``(*batch, m)``: which components each run measured.  A
+    component no run measured adds exactly nothing to any particle's
+    log-likelihood (:func:`gaussian_loglik` adds a row with a missing
+    component in order, the missing one as +0.0), so the particle filters
+    leave it out before their per-particle arithmetic (and sum the rest
+    ``in_order``): a WSN of 16 nodes of which 3-5 range the target then works
+    on a handful of components, with the bits of all 16, whatever the other
+    runs of the chunk measured.  None asks for the full width: nothing to
+    leave out, or nothing left.
+    """
+    m = valid.shape[-1]
+    somewhere = valid.reshape(-1, m).any(axis=0)
+    count = int(np.count_nonzero(somewhere))
+    if count == m or count == 0:
+        return None
+    return np.flatnonzero(somewhere)
+
+
+def gaussian_loglik(residual: np.ndarray, R: np.ndarray, *, in_order: bool = False) -> np.ndarray:
     """log N(residual; 0, R) over the last axis, NaN components left out.
 
     Missing (NaN) components are marginalised out exactly when R is
     diagonal.  With a full R, a residual containing NaN raises ``ValueError``.
+
+    A row with a missing component adds its components' terms in order, the
+    missing ones as +0.0, so it has the bits of leaving those components
+    out; ``in_order=True`` sums every row so (what a row gets that is
+    computed without its missing components: the particle filters leave out
+    the components no run measured).  A complete row otherwise gets NumPy's
+    sum, whose association depends on the number of components.
     """
     residual = np.asarray(residual)
     if residual.dtype.kind not in "fc":  # integers, booleans, objects; float32 is squared as float32, as it always was
@@ -66,7 +94,7 @@ def gaussian_loglik(residual: np.ndarray, R: np.ndarray) -> np.ndarray:
         else:  # float32 or complex squares, or a residual broadcast against R
             terms = terms / diag
         terms += norm
-        total = terms.sum(axis=-1)
+        total = _sum_in_order(terms) if in_order else terms.sum(axis=-1)
         if np.isnan(total).any():
             missing = np.broadcast_to(np.isnan(residual), terms.shape)
             if missing.any():
@@ -75,7 +103,8 @@ def gaussian_loglik(residual: np.ndarray, R: np.ndarray) -> np.ndarray:
                     np.putmask(terms, missing, 0.0)  # a boolean-indexed store costs 5x more here
                 else:
                     np.copyto(terms, np.broadcast_to(zero_terms, terms.shape), where=missing)
-                total = terms.sum(axis=-1)
+                in_order_total = _sum_in_order(terms)
+                total = in_order_total if in_order else np.where(missing.any(axis=-1), in_order_total, total)
         return -0.5 * total
     if np.isnan(residual).any():
         raise ValueError("missing measurement components need a diagonal measurement covariance")
@@ -84,6 +113,23 @@ def gaussian_loglik(residual: np.ndarray, R: np.ndarray) -> np.ndarray:
     maha = np.sum(y * y, axis=0).reshape(residual.shape[:-1])
     logdet = 2.0 * np.sum(np.log(np.diag(L)))
     return -0.5 * (maha + logdet + R.shape[0] * _LOG_2PI)
+
+
+def _sum_in_order(terms: np.ndarray) -> np.ndarray:
+    """Σ_j terms[..., j] added left to right, ((t₀ + t₁) + t₂) + ...
+
+    In this order a term of exactly +0.0 changes no bit of the sum, so a
+    missing component (its term zeroed) gives the bits of leaving it out:
+    what :func:`measured_somewhere` relies on.  NumPy's ``sum`` associates by
+    the length of the axis (pairwise, eight accumulators).  The compiled
+    kernels add in this order too.
+    """
+    if terms.shape[-1] == 0:
+        return np.zeros(terms.shape[:-1], dtype=terms.dtype)
+    total = 0.0 + terms[..., 0]  # a copy; 0.0 + t is t, as the compiled kernels' accumulator starts
+    for j in range(1, terms.shape[-1]):  # over the measurement's components, a handful
+        total += terms[..., j]
+    return total
 
 
 class _GaussianNoise:
