@@ -202,6 +202,9 @@ def test_components_no_run_measured_change_no_bit_whatever_the_chunk(kind):
     Zp, ll, const = filt._likelihoods(X, z, 3, valid, valid.any(axis=-1))
     full = gaussian_loglik(z[:, None, :] - sc.measurement.h(X, 3), sc.measurement.cov(3))
     assert const == 0.0 and np.array_equal(ll, full) and Zp.shape == (6, 100, 16)
+    # the cuckoo searches' fitness asks for no predicted measurements: only the ranges some run measured
+    Zp_none, ll_fit, _ = filt._likelihoods(X, z, 3, valid, valid.any(axis=-1), predicted=False)
+    assert Zp_none is None and np.array_equal(ll_fit, ll)
     for chunk in (1, 4):
         parts = monte_carlo(sc, [filt], runs=6, seed=11, chunk_size=chunk)
         a, b = whole.filters[filt.name], parts.filters[filt.name]

@@ -90,6 +90,23 @@ def _masked_loglik(residual, R):
     return -0.5 * np.where(valid.all(axis=-1), terms.sum(axis=-1), total)
 
 
+def test_range_models_measure_a_subset_of_their_anchors_with_the_bits_of_all(rng):
+    from pursuit.filters.particle import _has_h_components
+
+    grid = np.array([[x, y] for y in (5.0, 55.0, 105.0, 155.0) for x in (-40.0, 10.0, 60.0, 110.0)])
+    X = rng.normal([30.0, 1.0, 80.0, 0.5], 20.0, (6, 50, 4))
+    cols = np.array([1, 4, 5, 9, 15])
+    for model in (RangeSensors(grid, 0.8), TimeOfArrival(grid, 1e-3)):
+        assert np.array_equal(model.h_components(X, 3, cols), model.h(X, 3)[..., cols])
+        assert _has_h_components(model)
+
+    class Offset(RangeSensors):  # a user's subclass that changes h alone must not be measured by h_components
+        def h(self, x, k=None):
+            return super().h(x, k) + 1.0
+
+    assert not _has_h_components(Offset(grid, 0.8)) and not _has_h_components(LinearGaussian(np.eye(2), np.eye(2)))
+
+
 def test_measured_somewhere_names_the_components_some_run_measured():
     valid = np.zeros((2, 3, 5), dtype=bool)
     valid[0, 1, [1, 3]] = True

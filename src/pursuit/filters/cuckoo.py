@@ -493,7 +493,7 @@ class CuckooParticleFilter(ParticleFilterBase):
     def _fitness(self, C: np.ndarray, z: np.ndarray, k: int) -> np.ndarray:
         valid = ~np.isnan(z)
         measured = valid.any(axis=-1)
-        return self._likelihoods(C, z, k, valid, measured)[1]
+        return self._likelihoods(C, z, k, valid, measured, predicted=False)[1]
 
     def step(
         self, state: ParticleState, z: np.ndarray, k: int | None = None, dt: float | None = None

@@ -277,6 +277,12 @@ class Weighed:
         return self.s**2 / np.einsum("...i,...i->...", self.e, self.e)
 
 
+def _has_h_components(measurement: Any) -> bool:
+    """Whether ``measurement.h_components`` is defined where its ``h`` is (a subclass overriding ``h`` alone must not use it)."""
+    owner = {name: next((c for c in type(measurement).__mro__ if name in c.__dict__), None) for name in ("h", "h_components")}
+    return owner["h_components"] is not None and owner["h_components"] is owner["h"]
+
+
 def _exp_shifted(
     a: np.ndarray, fallback: np.ndarray | None, work: Workspace | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -386,26 +392,41 @@ class ParticleFilterBase(FilterBase):
 
     # -- the measurement step ------------------------------------------------
     def _likelihoods(
-        self, X: np.ndarray, z: np.ndarray, k: int, valid: np.ndarray, measured: np.ndarray, work: Workspace | None = None
+        self,
+        X: np.ndarray,
+        z: np.ndarray,
+        k: int,
+        valid: np.ndarray,
+        measured: np.ndarray,
+        work: Workspace | None = None,
+        predicted: bool = True,
     ):
         """Predicted measurements ``(*b, N, m)``, log-likelihoods ``(*b, N)`` and their constant.
 
         The log-likelihood of particle i is ``ll[i] + const``; for the stock
         Gaussian models ``ll`` is −½ νᵀR⁻¹ν and ``const`` the normalising
         constant, which saves a pass over the particles.  With ``work``, the
-        returned ``ll`` may live in a scratch buffer.
+        returned ``ll`` may live in a scratch buffer.  ``predicted=False``
+        (the cuckoo searches' fitness) may return None for the predicted
+        measurements: a range model then computes only the ranges some run
+        measured (:meth:`~pursuit.models.RangeSensors.h_components`), the same
+        bits as those columns of ``h``.
         """
         meas = self.measurement
-        Zp = np.asarray(meas.h(X, k), dtype=float)
+        cols = None if not self._stock or valid.all() else measured_somewhere(valid)
+        if cols is not None and not predicted and _has_h_components(meas):
+            Zp = None
+        else:
+            Zp = np.asarray(meas.h(X, k), dtype=float)
         everywhere = bool(measured.all())
         const = 0.0
         if self._stock:
             R = np.asarray(meas.cov(k), dtype=float)
-            cols = None if valid.all() else measured_somewhere(valid)
             if cols is None:
                 r = np.subtract(z[..., None, :], Zp, out=scratch(work, "lik.r", Zp.shape))
             else:  # components no run measured add exactly nothing (gaussian_loglik): the others only
-                r = z[..., None, cols] - Zp[..., cols]
+                Zc = np.asarray(meas.h_components(X, k, cols), dtype=float) if Zp is None else Zp[..., cols]
+                r = z[..., None, cols] - Zc
                 R = R[np.ix_(cols, cols)]
             diag = np.diag(R)
             if valid.all() and np.count_nonzero(R - np.diag(diag)) == 0:

@@ -290,7 +290,18 @@ class RangeSensors(_GaussianNoise):
 
     def h(self, x: np.ndarray, k: int | None = None) -> np.ndarray:
         """Ranges to every anchor, ``(*b, s)``."""
-        d = self._deltas(x)
+        return self._ranges(x, slice(None))
+
+    def h_components(self, x: np.ndarray, k: int | None, cols: np.ndarray | slice) -> np.ndarray:
+        """Ranges to the anchors ``cols`` only: ``h(x, k)[..., cols]``, the same bits.
+
+        The particle filters' cuckoo searches measure every moved particle
+        against the nodes some run heard; a 16-node grid hears 3-5.
+        """
+        return self._ranges(x, cols)
+
+    def _ranges(self, x: np.ndarray, cols: np.ndarray | slice) -> np.ndarray:
+        d = _positions(x, self.position_indices)[..., None, :] - self.anchors[cols]  # (*b, s, d)
         return np.sqrt(np.einsum("...i,...i->...", d, d))
 
     def jacobian(self, x: np.ndarray, k: int | None = None) -> np.ndarray:
@@ -328,6 +339,10 @@ class TimeOfArrival(RangeSensors):
     def h(self, x: np.ndarray, k: int | None = None) -> np.ndarray:
         """Travel times to every anchor, ``(*b, s)``."""
         return super().h(x, k) / self.c
+
+    def h_components(self, x: np.ndarray, k: int | None, cols: np.ndarray | slice) -> np.ndarray:
+        """Travel times to the anchors ``cols`` only: ``h(x, k)[..., cols]``, the same bits."""
+        return self._ranges(x, cols) / self.c
 
     def jacobian(self, x: np.ndarray, k: int | None = None) -> np.ndarray:
         """``(*b, s, n)``: range Jacobian divided by c."""
