@@ -191,7 +191,7 @@ def test_components_no_run_measured_change_no_bit_whatever_the_chunk(kind):
     grid = [[x, y] for y in (5.0, 55.0, 105.0, 155.0) for x in (-40.0, 10.0, 60.0, 110.0)]
     sc = WSNRange(steps=12, anchors=grid, sensing_radius=60.0, p_detect=0.9)
     filt = build_filter({"type": kind, "particles": 100}, sc, "filters[0]")
-    whole = monte_carlo(sc, [filt], runs=6, seed=11, chunk_size=6)
+    whole = monte_carlo(sc, [filt], runs=6, seed=11)
     unmeasured = np.isnan(whole.measurements)  # (steps, runs, nodes)
     assert unmeasured.all(axis=1).any(axis=-1).all()  # every step, nodes that no run measured: left out
     assert (unmeasured[:, :1].all(axis=1) != unmeasured.all(axis=1)).any()  # a chunk of one run leaves out more
@@ -205,13 +205,64 @@ def test_components_no_run_measured_change_no_bit_whatever_the_chunk(kind):
     # the cuckoo searches' fitness asks for no predicted measurements: only the ranges some run measured
     Zp_none, ll_fit, _ = filt._likelihoods(X, z, 3, valid, valid.any(axis=-1), predicted=False)
     assert Zp_none is None and np.array_equal(ll_fit, ll)
-    for chunk in (1, 4):
-        parts = monte_carlo(sc, [filt], runs=6, seed=11, chunk_size=chunk)
+    _assert_chunking_changes_no_bit(sc, filt, 6, (1, 4))
+
+
+def _assert_chunking_changes_no_bit(sc, filt, runs, chunks):
+    whole = monte_carlo(sc, [filt], runs=runs, seed=11, chunk_size=runs)
+    for chunk in chunks:
+        parts = monte_carlo(sc, [filt], runs=runs, seed=11, chunk_size=chunk)
         a, b = whole.filters[filt.name], parts.filters[filt.name]
         np.testing.assert_array_equal(a.estimates, b.estimates)
         np.testing.assert_array_equal(a.covariances, b.covariances)
         for key in a.info:
             np.testing.assert_array_equal(a.info[key], b.info[key], err_msg=key)
+
+
+@pytest.mark.parametrize("kind", ["pf", "cs-pf"])
+def test_a_run_that_measured_everything_keeps_its_bits_beside_runs_that_did_not(kind):
+    """One node heard with probability 0.9 (p1-wsn's first variant): in a chunk, some runs measured and some
+    did not; each run's log-likelihood arithmetic is chosen by what it measured, not by its chunk-mates."""
+    from pursuit.config.build import build_filter
+
+    sc = WSNRange(steps=20, anchors=[[0.0, 0.0]], sensing_radius=60.0, p_detect=0.9)
+    filt = build_filter({"type": kind, "particles": 60}, sc, "filters[0]")
+    z = monte_carlo(sc, [filt], runs=8, seed=11).measurements
+    mixed = np.isnan(z[..., 0]).any(axis=1) & ~np.isnan(z[..., 0]).all(axis=1)
+    assert mixed.sum() >= 3  # steps where some runs measured and some did not
+    _assert_chunking_changes_no_bit(sc, filt, 8, (1, 3))
+
+
+def test_a_full_measurement_covariance_refuses_missing_components_whatever_the_chunk():
+    """Only a diagonal R lets the filters leave components out; with a full R a missing component is refused
+    (gaussian_loglik's ValueError) whether or not the other runs measured it."""
+    R = np.array([[1.0, 0.3, 0.0], [0.3, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    meas = LinearGaussian(np.eye(3), R)
+    filt = BootstrapParticleFilter(RandomWalk3(), meas, particles=20)
+    for runs in (1, 2, 3):
+        state = filt.init(pu.Gaussian(np.zeros(3), np.eye(3)), batch=(runs,), rng=np.random.default_rng(0))
+        z = np.zeros((runs, 3))
+        z[:, 2] = np.nan  # missing in every run: could be left out, but R is not diagonal
+        if runs == 3:
+            z[2, 2] = 0.5
+        with pytest.raises(ValueError, match="diagonal"):
+            filt.step(state, z)
+
+
+@dataclass(frozen=True)
+class RandomWalk3:
+    """3-D random walk (user-style)."""
+
+    dim = 3
+
+    def f(self, x, k=None, dt=None):
+        return np.asarray(x, dtype=float)
+
+    def cov(self, k=None, dt=None):
+        return np.eye(3)
+
+    def sample(self, x, k, rng, dt=None):
+        return np.asarray(x, dtype=float) + rng.standard_normal(np.shape(x))
 
 
 def test_ess_threshold_controls_resampling():

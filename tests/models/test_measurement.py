@@ -115,6 +115,7 @@ def test_measured_somewhere_names_the_components_some_run_measured():
     assert measured_somewhere(np.ones((4, 5), dtype=bool)) is None  # nothing to leave out
     assert measured_somewhere(np.zeros((4, 5), dtype=bool)) is None  # nothing left: the filters' own rules
     assert measured_somewhere(np.array([True, False])).tolist() == [0]  # one run, unbatched
+    assert measured_somewhere(np.zeros((4, 0), dtype=bool)) is None  # no components at all
 
 
 def test_leaving_out_missing_components_gives_the_bits_of_all_of_them(rng):

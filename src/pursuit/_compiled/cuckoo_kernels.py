@@ -300,13 +300,18 @@ def _cuckoo_step(particles, draws, obs, sensor, search, opts, out):
         mx, s, s2, rst = exp_shifted_run(a, offset, with_prior, e)
         lk = mx + math.log(s) + ((const if measured else 0.0) - logN)
         loglik[r] = (-np.inf if rst else lk) if measured else 0.0
-        # fitness of the propagated particles, then the search
-        add = include_const
+        # fitness of the propagated particles, then the search; a run with a missing component carries
+        # the normalising constant in its fitness (the NumPy filter chooses so run by run)
+        n_valid = 0
+        for j in range(m):
+            if valid[r, j]:
+                n_valid += 1
+        add = include_const or n_valid < m
         F = np.empty(N)
-        if include_const:
-            # include_const (True here) and np.int64(0), not literals: the signature the other callers use
-            _fitness_rows(sensor, Xp, np.int64(0), N, z[r], valid[r], measured, include_const,
-                          _fit_consts(sensor.R, include_const), np.empty((N, m)), F)
+        if add:
+            # add (True here) and np.int64(0), not literals: the signature the other callers use
+            _fitness_rows(sensor, Xp, np.int64(0), N, z[r], valid[r], measured, add,
+                          _fit_consts(sensor.R, add), np.empty((N, m)), F)
         else:
             for i in range(N):
                 F[i] = ll[i] if measured else 0.0
@@ -566,12 +571,13 @@ def _mh_run(b, particles, buffers, streams, obs, G, sensor, search, opts, pf, st
         if valid[b, j]:
             n_valid += 1
     measured = n_valid > 0
+    add = include_const or n_valid < m  # a run with a missing component: the constant in its fitness
     F = np.empty(N)
-    cst = _fit_consts(sensor.R, include_const)
-    _fitness_rows(sensor, X, np.int64(0), N, z[b], valid[b], measured, include_const, cst, np.empty((N, m)), F)
+    cst = _fit_consts(sensor.R, add)
+    _fitness_rows(sensor, X, np.int64(0), N, z[b], valid[b], measured, add, cst, np.empty((N, m)), F)
     acc = 0
     if n_iter > 0:
-        acc = mh_search_run(X, Mx, XI, F, G, normals[b], uniforms[b], search, sensor, z[b], valid[b], measured, include_const)
+        acc = mh_search_run(X, Mx, XI, F, G, normals[b], uniforms[b], search, sensor, z[b], valid[b], measured, add)
     if not weighted:
         # weights after the moves: uniform where the run resampled, else the (predictive) weights
         s = 0.0

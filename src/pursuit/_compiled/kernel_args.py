@@ -152,7 +152,7 @@ class CuckooOutputs(NamedTuple):
 class MHOptions(NamedTuple):
     """The switches of a CS-PF / ICS-PF step with ``acceptance="mh"``."""
 
-    include_const: bool  # the fitness carries the normalising constant (as the NumPy fitness)
+    include_const: bool  # every run's fitness carries the normalising constant (angle models; else runs with a missing component)
     weighted_estimate: bool  # estimate="weighted": the weighted moments before resampling
     resampler: int
 

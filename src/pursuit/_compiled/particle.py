@@ -254,8 +254,9 @@ def cuckoo_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: Particle
     else:
         normals, uniforms = np.empty((B, 0)), np.empty((B, 0))
     sequential = filt.mode == "sequential"
-    # the NumPy fitness carries the normalising constant unless the stock all-measured fast path applies
-    include_const = bool(hs.angle or not valid.all())
+    # an angle model's fitness always carries the normalising constant; the kernels add it, run by run,
+    # where a run has a missing component (the NumPy fitness's choice, made per run)
+    include_const = bool(hs.angle)
     rkind = RESAMPLER_CODES[filt.resampler]
     out = _cuckoo_outputs(B, N, n, m)
     pf = out.pf
@@ -361,8 +362,9 @@ def _mh_step(filt, specs: tuple[MotionSpec, MeasurementSpec], state: ParticleSta
             uniforms = np.ascontiguousarray(rng.random((*batch, n_unif)).reshape(B, n_unif))
         else:
             normals, uniforms = np.empty((B, 0)), np.empty((B, 0))
-    # the NumPy fitness carries the normalising constant unless the stock all-measured fast path applies
-    include_const = bool(hs.angle or not valid.all())
+    # an angle model's fitness always carries the normalising constant; the kernels add it, run by run,
+    # where a run has a missing component (the NumPy fitness's choice, made per run)
+    include_const = bool(hs.angle)
     out = _cuckoo_outputs(B, N, n, m)
     kernel = CK.mh_step_parallel if use_parallel(B) else CK.mh_step_serial
     opts = MHOptions(include_const, filt.estimate == "weighted", rkind)

@@ -138,7 +138,8 @@ def default_chunk_size(filters: Sequence[Any]) -> int:
         if getattr(filt, "compiled", False) or not isinstance(particles, (int, np.integer)):
             continue
         dim = getattr(getattr(filt, "motion", None), "dim", None)
-        largest = max(largest, int(particles) * (dim if isinstance(dim, int) and dim > 0 else 1))
+        ok = isinstance(dim, (int, np.integer)) and not isinstance(dim, bool) and dim > 0
+        largest = max(largest, int(particles) * (int(dim) if ok else 1))
     if largest == 0:
         return DEFAULT_CHUNK
     return max(1, min(DEFAULT_CHUNK, CACHE_PARTICLE_VALUES // largest))

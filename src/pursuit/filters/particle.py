@@ -245,7 +245,9 @@ class Weighed:
     ll, ll_const
         Per-particle log-likelihoods are ``ll + ll_const``: ``ll`` ``(*b, N)``
         (for Gaussian noise −½ νᵀR⁻¹ν, the fitness of paper P1) and a
-        constant (0 in rows with nothing measured).
+        constant, one float or ``(*b,)`` per run (0 in rows with nothing
+        measured, and in rows whose ``ll`` holds it: those with a missing
+        component).
     measured
         ``(*b,)`` rows with at least one measured component.
     info
@@ -257,7 +259,7 @@ class Weighed:
     e: np.ndarray
     s: np.ndarray
     ll: np.ndarray
-    ll_const: float
+    ll_const: float | np.ndarray
     measured: np.ndarray
     info: dict[str, np.ndarray]
 
@@ -275,6 +277,19 @@ class Weighed:
     def ess(self) -> np.ndarray:
         """Effective sample size of the new weights."""
         return self.s**2 / np.einsum("...i,...i->...", self.e, self.e)
+
+
+def _normalising_constant(diag: np.ndarray) -> float:
+    """−½ (Σ log σ² + m log 2π) of a diagonal R."""
+    return -0.5 * (float(np.sum(np.log(diag))) + diag.size * _LOG_2PI)
+
+
+def _complete_loglik(r2: np.ndarray, diag: np.ndarray) -> np.ndarray:
+    """−½ Σ_j r_j²/σ_j² from the squared residuals ``(*b, N, m)`` (overwritten when m = 1)."""
+    if diag.size == 1:
+        r2 *= -0.5 / diag[0]
+        return r2[..., 0]
+    return np.einsum("...i,i->...", r2, -0.5 / diag)
 
 
 def _has_h_components(measurement: Any) -> bool:
@@ -413,35 +428,38 @@ class ParticleFilterBase(FilterBase):
         bits as those columns of ``h``.
         """
         meas = self.measurement
-        cols = None if not self._stock or valid.all() else measured_somewhere(valid)
+        R = np.asarray(meas.cov(k), dtype=float) if self._stock else None
+        diagonal = R is not None and np.count_nonzero(R - np.diag(np.diag(R))) == 0
+        # components no run measured add exactly nothing with a diagonal R (gaussian_loglik): left out
+        cols = None if not diagonal or valid.all() else measured_somewhere(valid)
         if cols is not None and not predicted and _has_h_components(meas):
             Zp = None
         else:
             Zp = np.asarray(meas.h(X, k), dtype=float)
         everywhere = bool(measured.all())
-        const = 0.0
+        const: float | np.ndarray = 0.0
         if self._stock:
-            R = np.asarray(meas.cov(k), dtype=float)
             if cols is None:
                 r = np.subtract(z[..., None, :], Zp, out=scratch(work, "lik.r", Zp.shape))
-            else:  # components no run measured add exactly nothing (gaussian_loglik): the others only
+            else:
                 Zc = np.asarray(meas.h_components(X, k, cols), dtype=float) if Zp is None else Zp[..., cols]
                 r = z[..., None, cols] - Zc
                 R = R[np.ix_(cols, cols)]
             diag = np.diag(R)
-            if valid.all() and np.count_nonzero(R - np.diag(diag)) == 0:
-                # the stock Gaussian log-likelihood without the missing-data bookkeeping
-                const = -0.5 * (float(np.sum(np.log(diag))) + diag.size * _LOG_2PI)
-                np.square(r, out=r)
-                if diag.size == 1:
-                    r *= -0.5 / diag[0]
-                    ll = r[..., 0]
-                else:
-                    ll = np.einsum("...i,i->...", r, -0.5 / diag)
+            # A run that measured every component gets −½ Σ ν²/σ² and the constant apart (a pass fewer);
+            # one with a missing component gets gaussian_loglik's terms.  Chosen run by run, so that a
+            # run's bits do not depend on what the other runs of its chunk measured.
+            complete = valid.all(axis=-1) if diagonal else np.zeros(valid.shape[:-1], dtype=bool)
+            if complete.all():
+                const = _normalising_constant(diag)
+                ll = _complete_loglik(np.square(r, out=r), diag)
             else:
-                # rows with nothing measured get a dummy residual; their log-likelihood is set to 0 below
+                # rows with nothing measured get a dummy residual; their log-likelihood is set to 0 below;
                 # in_order with components left out: every row had a missing one at full width
                 ll = gaussian_loglik(r if everywhere else np.where(measured[..., None, None], r, 0.0), R, in_order=cols is not None)
+                if complete.any():  # (then nothing was left out)
+                    ll = np.where(complete[..., None], _complete_loglik(np.square(r), diag), ll)
+                    const = np.where(complete, _normalising_constant(diag), 0.0)
         else:
             zc = z if everywhere else np.where(measured[..., None], z, 0.0)
             ll = np.asarray(meas.loglik(zc[..., None, :], X, k), dtype=float)

@@ -58,6 +58,8 @@ def measured_somewhere(valid: np.ndarray) -> np.ndarray | None:
     leave out, or nothing left.
     """
     m = valid.shape[-1]
+    if m == 0:
+        return None
     somewhere = valid.reshape(-1, m).any(axis=0)
     count = int(np.count_nonzero(somewhere))
     if count == m or count == 0:
@@ -285,8 +287,8 @@ class RangeSensors(_GaussianNoise):
         """Number of anchors."""
         return self.anchors.shape[0]
 
-    def _deltas(self, x: np.ndarray) -> np.ndarray:
-        return _positions(x, self.position_indices)[..., None, :] - self.anchors  # (*b, s, d)
+    def _deltas(self, x: np.ndarray, cols: np.ndarray | slice = slice(None)) -> np.ndarray:
+        return _positions(x, self.position_indices)[..., None, :] - self.anchors[cols]  # (*b, s, d)
 
     def h(self, x: np.ndarray, k: int | None = None) -> np.ndarray:
         """Ranges to every anchor, ``(*b, s)``."""
@@ -301,7 +303,7 @@ class RangeSensors(_GaussianNoise):
         return self._ranges(x, cols)
 
     def _ranges(self, x: np.ndarray, cols: np.ndarray | slice) -> np.ndarray:
-        d = _positions(x, self.position_indices)[..., None, :] - self.anchors[cols]  # (*b, s, d)
+        d = self._deltas(x, cols)
         return np.sqrt(np.einsum("...i,...i->...", d, d))
 
     def jacobian(self, x: np.ndarray, k: int | None = None) -> np.ndarray:
