@@ -128,7 +128,7 @@ def _parser(track: bool = True) -> argparse.ArgumentParser:
         sp.add_argument("-o", "--out", help="output folder (default: results/NAME, or results/ for reproduce)")
         sp.add_argument("--runs", type=int, help="override the number of Monte Carlo runs")
         sp.add_argument("--seed", type=int, help="override the root seed")
-        sp.add_argument("--chunk-size", type=int, help="runs per chunk (memory bound; default 1000, fewer for NumPy particle filters with many particles)")
+        sp.add_argument("--chunk-size", type=int, help="runs per chunk (memory bound)")
         sp.add_argument("--no-progress", action="store_true", help="never show a progress bar")
         sp.add_argument("--no-pdf", action="store_true", help="write figures as PNG only (default: PNG and PDF)")
         sp.add_argument(
@@ -351,7 +351,7 @@ def _backend(args, source: str):
 
 def _execute(exp, out_dir: Path, args, backend, side_by_side: int = 1) -> None:
     from .engine.backends import engine_options
-    from .engine.montecarlo import DEFAULT_KEEP_RUNS
+    from .engine.montecarlo import DEFAULT_CHUNK, DEFAULT_KEEP_RUNS
     from .report.output import format_table, write_output
 
     # the header first, so that it stands above the experiment's progress bars
@@ -364,7 +364,7 @@ def _execute(exp, out_dir: Path, args, backend, side_by_side: int = 1) -> None:
     formats = ("png",) if args.no_pdf else ("png", "pdf")
     engine = {
         "backend": backend.describe(),
-        "chunk_size": output.sidecar.get("chunk_size") or "auto",  # monte_carlo's default_chunk_size per comparison
+        "chunk_size": output.sidecar.get("chunk_size") or DEFAULT_CHUNK,
         "store": args.store or "auto",
     }
     if side_by_side > 1:  # reproduce --workers: this experiment computed whole in one of these processes

@@ -130,35 +130,3 @@ def test_the_compile_warm_up_leaves_a_compiled_filters_draws_alone():
     direct = pu.run(pf, sim.measurements, sim.prior, rng=run_streams(11, range(6), FILTER_STREAM))
     # the untimed one-step call draws from its own stream: the timed run is the filter's own, bit for bit
     np.testing.assert_array_equal(result.filters[pf.name].estimates, direct.mean)
-
-
-def test_default_chunk_keeps_many_numpy_particles_within_a_cache():
-    """1000 runs per chunk, fewer for a NumPy particle filter with many particles; compiled ones keep 1000."""
-    from pursuit.engine.montecarlo import CACHE_PARTICLE_VALUES, DEFAULT_CHUNK, default_chunk_size
-    from pursuit.filters.particle import BootstrapParticleFilter
-    from pursuit.scenarios.ungm import UNGM
-
-    sc, wsn = UNGM(steps=5), WSNRange(steps=5)
-    big = BootstrapParticleFilter(sc.motion, sc.measurement, particles=20000)
-    assert default_chunk_size([big]) == CACHE_PARTICLE_VALUES // 20000 == 13
-    four = BootstrapParticleFilter(wsn.motion, wsn.measurement, particles=20000)  # 4 coordinates each
-    assert default_chunk_size([*_filters(wsn), four]) == CACHE_PARTICLE_VALUES // 80000 == 3
-    assert default_chunk_size(_filters(wsn)) == DEFAULT_CHUNK
-    assert default_chunk_size([BootstrapParticleFilter(sc.motion, sc.measurement, particles=10)]) == DEFAULT_CHUNK
-    huge = BootstrapParticleFilter(wsn.motion, wsn.measurement, particles=10**6)
-    assert default_chunk_size([huge]) == 1
-    pytest.importorskip("numba")
-    assert default_chunk_size([BootstrapParticleFilter(sc.motion, sc.measurement, particles=20000, backend="numba")]) == DEFAULT_CHUNK
-
-
-def test_the_default_chunk_gives_the_bits_of_one_chunk(monkeypatch):
-    """The cache-sized default splits the runs; the results are those of one chunk, bit for bit."""
-    import pursuit.engine.montecarlo as mc
-    from pursuit.filters.particle import BootstrapParticleFilter
-    from pursuit.scenarios.ungm import UNGM
-
-    sc = UNGM(steps=8)
-    filt = BootstrapParticleFilter(sc.motion, sc.measurement, particles=50)
-    monkeypatch.setattr(mc, "CACHE_PARTICLE_VALUES", 150)  # 3 runs per chunk
-    assert mc.default_chunk_size([filt]) == 3
-    _assert_same(monte_carlo(sc, [filt], runs=7, seed=4, chunk_size=7), monte_carlo(sc, [filt], runs=7, seed=4))

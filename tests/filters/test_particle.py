@@ -334,3 +334,16 @@ def test_nis_of_a_non_finite_or_singular_spread_is_nan_not_an_error():
     inv = _safe_inverse(S)
     np.testing.assert_allclose(inv[0], np.linalg.inv(S[0]))
     assert np.all(np.isnan(inv[1])) and np.all(np.isnan(inv[2]))
+
+
+@pytest.mark.xfail(strict=False, reason=(  # not strict: other CPUs may happen to agree
+    "known, not fixed (2026-12-05): NumPy's einsum '...i,...i->...' over more than 8192 particles gives a "
+    "batch of one run other bits than the same row in a larger batch (its buffered reduction), so a chunk "
+    "of one run of a PF with N > 8192 differs at round-off from that run in a larger chunk"
+))
+def test_a_lone_run_with_many_particles_has_the_bits_it_has_in_a_batch():
+    sc = UNGM(steps=3)
+    filt = BootstrapParticleFilter(sc.motion, sc.measurement, particles=20000)
+    a = monte_carlo(sc, [filt], runs=3, seed=5, chunk_size=3).filters["PF"]
+    b = monte_carlo(sc, [filt], runs=3, seed=5, chunk_size=1).filters["PF"]
+    np.testing.assert_array_equal(a.estimates, b.estimates)

@@ -46,16 +46,11 @@ __all__ = [
     "combine_summaries",
     "SummaryCollector",
     "DEFAULT_CHUNK",
-    "CACHE_PARTICLE_VALUES",
-    "default_chunk_size",
     "DEFAULT_KEEP_RUNS",
     "AUTO_FULL_LIMIT",
 ]
 
 DEFAULT_CHUNK = 1000
-CACHE_PARTICLE_VALUES = 1 << 18
-"""A NumPy particle filter's chunk holds about this many particle coordinates (2 MiB of float64:
-a core's L2 cache, so that each elementwise pass over the particles stays in it)."""
 DEFAULT_KEEP_RUNS = 10
 AUTO_FULL_LIMIT = 1 << 30
 """``store="auto"`` keeps every run's arrays while they are estimated to take at most this many bytes."""
@@ -118,31 +113,6 @@ def run_chunk(
         if on_filter_done is not None:
             on_filter_done()
     return ChunkResult(start, stop, sim.times, sim.truth, sim.measurements, tracks)
-
-
-def default_chunk_size(filters: Sequence[Any]) -> int:
-    """Runs per chunk when the caller names none: :data:`DEFAULT_CHUNK`, fewer for many particles.
-
-    A particle filter computed with NumPy makes a dozen elementwise passes
-    over its ``(runs, N, n)`` particles each step; once they outgrow a core's
-    cache, each pass waits on memory (a bootstrap PF with N = 20 000 on 200
-    runs: 16 % slower in one chunk than in chunks of 10-13 runs).  So the
-    chunk holds about :data:`CACHE_PARTICLE_VALUES` particle coordinates of
-    the largest such filter, at least one run.  Compiled filters loop over
-    their particles without temporaries and keep :data:`DEFAULT_CHUNK`.  The
-    results do not depend on the chunk size.
-    """
-    largest = 0
-    for filt in filters:
-        particles = getattr(filt, "particles", None)
-        if getattr(filt, "compiled", False) or not isinstance(particles, (int, np.integer)):
-            continue
-        dim = getattr(getattr(filt, "motion", None), "dim", None)
-        ok = isinstance(dim, (int, np.integer)) and not isinstance(dim, bool) and dim > 0
-        largest = max(largest, int(particles) * (int(dim) if ok else 1))
-    if largest == 0:
-        return DEFAULT_CHUNK
-    return max(1, min(DEFAULT_CHUNK, CACHE_PARTICLE_VALUES // largest))
 
 
 def _sensors(scenario: Any) -> np.ndarray | None:
@@ -514,9 +484,8 @@ def monte_carlo(
     seed
         Root seed; run i uses ``SeedSequence(seed, spawn_key=(i,))``.
     chunk_size
-        Runs processed together (default: :func:`default_chunk_size`, 1000,
-        or fewer for a NumPy particle filter with many particles).  Memory
-        grows with it; the results do not depend on it.
+        Runs processed together (default 1000).  Memory grows with it; the
+        results do not depend on it.
     keep_cov
         Keep covariances (needed for NEES).
     keep_info
@@ -557,7 +526,7 @@ def monte_carlo(
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed: must be a non-negative integer, got {seed!r}")
     filters = validate_filters(filters)
-    chunk_size = positive_int("chunk_size", default_chunk_size(filters) if chunk_size is None else chunk_size)
+    chunk_size = positive_int("chunk_size", DEFAULT_CHUNK if chunk_size is None else chunk_size)
     opts = current_options()
     can_summarise = store is None  # a caller that asked for a mode (a sweep needs every run) keeps it
     store = resolve_store(store or opts.store or "auto", scenario, filters, runs, keep_cov)
