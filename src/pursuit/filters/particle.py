@@ -61,6 +61,7 @@ streams are used.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -294,7 +295,13 @@ def _complete_loglik(r2: np.ndarray, diag: np.ndarray) -> np.ndarray:
 
 def _has_h_components(measurement: Any) -> bool:
     """Whether ``measurement.h_components`` is defined where its ``h`` is (a subclass overriding ``h`` alone must not use it)."""
-    owner = {name: next((c for c in type(measurement).__mro__ if name in c.__dict__), None) for name in ("h", "h_components")}
+    return _class_has_h_components(type(measurement))
+
+
+@lru_cache(maxsize=None)
+def _class_has_h_components(cls: type) -> bool:
+    """:func:`_has_h_components` per class, walked once (the cuckoo fitness asks every move)."""
+    owner = {name: next((c for c in cls.__mro__ if name in c.__dict__), None) for name in ("h", "h_components")}
     return owner["h_components"] is not None and owner["h_components"] is owner["h"]
 
 

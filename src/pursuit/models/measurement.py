@@ -96,7 +96,8 @@ def gaussian_loglik(residual: np.ndarray, R: np.ndarray, *, in_order: bool = Fal
         else:  # float32 or complex squares, or a residual broadcast against R
             terms = terms / diag
         terms += norm
-        total = _sum_in_order(terms) if in_order else terms.sum(axis=-1)
+        total = terms.sum(axis=-1)  # the complete rows' sum, and a cheap test for a missing component
+        incomplete = None
         if np.isnan(total).any():
             missing = np.broadcast_to(np.isnan(residual), terms.shape)
             if missing.any():
@@ -105,8 +106,11 @@ def gaussian_loglik(residual: np.ndarray, R: np.ndarray, *, in_order: bool = Fal
                     np.putmask(terms, missing, 0.0)  # a boolean-indexed store costs 5x more here
                 else:
                     np.copyto(terms, np.broadcast_to(zero_terms, terms.shape), where=missing)
-                in_order_total = _sum_in_order(terms)
-                total = in_order_total if in_order else np.where(missing.any(axis=-1), in_order_total, total)
+                incomplete = missing.any(axis=-1)
+        if in_order:  # one in-order sum, after the missing terms are zeroed
+            total = _sum_in_order(terms)
+        elif incomplete is not None:
+            total = np.where(incomplete, _sum_in_order(terms), total)
         return -0.5 * total
     if np.isnan(residual).any():
         raise ValueError("missing measurement components need a diagonal measurement covariance")
